@@ -1,0 +1,1 @@
+"""Albedit's desktop front end (PySide6) and command line."""
