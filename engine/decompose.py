@@ -1,0 +1,281 @@
+"""Splitting observations into interaction components (paper Sec. 3.2).
+
+A decomposition of order K holds, per pixel and channel, the components whose κ-weighted
+sum is the recolored photograph: inside the target ``R^i L_d`` (Eq. 2-3, 6), outside it the
+unreached light ``L̄_d`` and ``C R^i L_d`` (Eq. 4, 9).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine._checks import check_choice, check_float_image, check_kappa, check_mask, check_order, float_dtype
+from engine.errors import InputError
+from engine.figurate import MAX_ORDER, outside_matrix, transport_matrix
+from engine.progress import Progress, ShouldStop, checkpoint, report
+from engine.solve import ConeSolver, Constraint, cone_basis
+
+#: Pixels per tile: bounds the solver's working memory (~K·C·4·4 bytes per pixel).
+TILE_PIXELS = 1 << 18
+
+
+@dataclass(frozen=True, eq=False)
+class Decomposition:
+    """Interaction components of one target, packed for recoloring.
+
+    Attributes
+    ----------
+    components : (K, H, W, C) float32
+        On target pixels ``R^i L_d`` (i = 0..K-1); elsewhere ``C R^i L_d`` for
+        i < K_out (zero beyond). Both families share one array because they never share a
+        pixel, and recoloring weighs index i by ``κ^{i+1}`` in both (Eq. 3 and 4).
+    unreached : (H, W, C) float32
+        ``L̄_d``, light at non-target pixels that never touched the target (zero on target
+        pixels, and everywhere when ``unreached_light`` is False).
+    target : (H, W) bool
+    constraint : str
+        The solver's constraint mode.
+    unreached_light : bool
+        False when the lighting was declared projector-only (``L̄_d = 0``), which frees one
+        more outside component.
+    residual : (H, W) float32
+        Relative fit residual ``‖A x − b‖ / ‖b‖`` per pixel over all channels; zero where
+        the observations satisfy the constraints exactly.
+    """
+
+    components: np.ndarray
+    unreached: np.ndarray
+    target: np.ndarray
+    constraint: str = Constraint.ORDERED.value
+    unreached_light: bool = True
+    residual: np.ndarray | None = None
+
+    @property
+    def order(self) -> int:
+        """K, the number of inside components."""
+        return int(self.components.shape[0])
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(H, W, C)`` of the photograph."""
+        return tuple(self.components.shape[1:])  # type: ignore[return-value]
+
+    @property
+    def outside_order(self) -> int:
+        """Number of outside components: K - 1, or K without unreached light."""
+        return self.order - 1 if self.unreached_light else self.order
+
+    @property
+    def inside(self) -> np.ndarray:
+        """``(K, H, W, C)``: ``R^i L_d`` on target pixels, zero elsewhere (a new array)."""
+        return np.where(self.target[None, :, :, None], self.components, 0).astype(self.components.dtype)
+
+    @property
+    def outside(self) -> np.ndarray:
+        """``(K_out, H, W, C)``: ``C R^i L_d`` off the target, zero on it (a new array)."""
+        comps = self.components[: self.outside_order]
+        return np.where(self.target[None, :, :, None], 0, comps).astype(self.components.dtype)
+
+    @classmethod
+    def from_components(cls, inside, outside, unreached, target, *, constraint: str = "none") -> "Decomposition":
+        """Build a decomposition from separate inside/outside components (e.g. ground truth).
+
+        Parameters
+        ----------
+        inside : (K, H, W, C) float
+            ``R^i L_d``; only its target pixels are used.
+        outside : (K-1 or K, H, W, C) float
+            ``C R^i L_d``; only its non-target pixels are used. K components mean
+            projector-only lighting (no unreached light).
+        unreached : (H, W, C) float
+            ``L̄_d``; only non-target pixels are used.
+        target : (H, W) bool
+        """
+        inside = check_float_image("inside", inside, ndim=4)
+        outside = check_float_image("outside", outside, ndim=4)
+        unreached = check_float_image("unreached", unreached, ndim=3)
+        k = inside.shape[0]
+        if inside.shape[1:] != outside.shape[1:] or inside.shape[1:] != unreached.shape:
+            raise InputError(
+                f"inside {inside.shape}, outside {outside.shape} and unreached {unreached.shape} "
+                "must share (H, W, C)"
+            )
+        if outside.shape[0] not in (k - 1, k):
+            raise InputError(f"outside must have {k - 1} or {k} components for order {k}, got {outside.shape[0]}")
+        target = check_mask("target", target, inside.shape[1:3])
+        dtype = float_dtype(inside, outside, unreached)
+        t = target[None, :, :, None]
+        comps = np.where(t, inside, 0).astype(dtype)
+        comps[: outside.shape[0]] += np.where(t, 0, outside).astype(dtype)
+        with_unreached = outside.shape[0] == k - 1
+        unr = np.where(t[0], 0, unreached).astype(dtype) if with_unreached else np.zeros_like(unreached, dtype)
+        return cls(comps, unr, target.copy(), check_choice("constraint", constraint, Constraint), with_unreached)
+
+
+def decompose(
+    observations,
+    target,
+    *,
+    constraint: str = "ordered",
+    unreached_light: bool = True,
+    progress: Progress | None = None,
+    should_stop: ShouldStop | None = None,
+) -> Decomposition:
+    """Split a photograph and its re-emission captures into interaction components.
+
+    Parameters
+    ----------
+    observations : (K, H, W, C) float32 or float64, linear radiance
+        ``observations[0]`` is the photograph; ``observations[r]`` (r ≥ 1) the r-th
+        re-emission capture with the photograph's light removed. C is 1 or 3.
+    target : (H, W) bool
+        The target area A in camera pixels; neither empty nor covering every pixel.
+    constraint : {"ordered", "nonnegative", "none"}
+        "ordered" is the paper's ``0 ≤ R^i L_d ≤ R^{i-1} L_d`` (and ``L̄_d ≥ 0``).
+    unreached_light : bool
+        False declares projector-only lighting (``L̄_d = 0``), which frees one more outside
+        component (K instead of K-1).
+    progress, should_stop
+        Progress callback ``(step, total, message)`` and cooperative cancellation; see
+        :mod:`engine.progress`. Checked between tiles.
+
+    Returns
+    -------
+    Decomposition
+
+    Raises
+    ------
+    InputError
+        Bad shapes, dtypes, non-finite values, an order outside 1..8, an empty target or a
+        target covering the whole image.
+    Cancelled
+        ``should_stop()`` returned True.
+
+    Notes
+    -----
+    Inside the target each pixel-channel solves Eq. 6, ``obs[r] = Σ_n binom(n+r, r) R^n L_d``;
+    outside it Eq. 9 with the extra unknown ``L̄_d`` present only in ``obs[0]``. Work is done
+    in tiles of rows, so memory beyond the result stays bounded.
+
+    Examples
+    --------
+    >>> comps = np.array([1.0, 0.25], np.float32)           # R^0 L_d, R^1 L_d
+    >>> obs = np.zeros((2, 1, 2, 1), np.float32)
+    >>> obs[:, 0, 0, 0] = transport_matrix(2) @ comps       # a target pixel
+    >>> obs[:, 0, 1, 0] = [0.5 + 0.125, 0.125]              # outside: L̄_d + C L_d, C L_d
+    >>> d = decompose(obs, np.array([[True, False]]))
+    >>> np.round(d.inside[:, 0, 0, 0], 6).tolist(), d.unreached[0, 1, 0].item(), d.outside[0, 0, 1, 0].item()
+    ([1.0, 0.25], 0.5, 0.125)
+    """
+    obs = _check_observations(observations)
+    k, h, w, c = obs.shape
+    target = check_mask("target", target, (h, w))
+    n_inside = int(np.count_nonzero(target))
+    if n_inside == 0:
+        raise InputError("target is empty: paint at least one pixel of the surface to recolor")
+    if n_inside == h * w:
+        raise InputError(
+            f"target covers every pixel of the {h}x{w} image; a target is part of the photograph: "
+            "leave the rest of the scene outside it"
+        )
+    constraint = check_choice("constraint", constraint, Constraint)
+    unreached_light = bool(unreached_light)
+    inside_solver = ConeSolver(transport_matrix(k), cone_basis(k, constraint))
+    outside_solver = ConeSolver(
+        outside_matrix(k, unreached_light=unreached_light),
+        cone_basis(k, constraint, leading_free=unreached_light),
+    )
+    dtype = obs.dtype
+    components = np.zeros((k, h, w, c), dtype)
+    unreached = np.zeros((h, w, c), dtype)
+    residual = np.zeros((h, w), np.float32)
+    rows = max(1, TILE_PIXELS // w)
+    tiles = range(0, h, rows)
+    for step, y0 in enumerate(tiles):
+        checkpoint(should_stop, "decomposition")
+        report(progress, step, len(tiles), "decomposing")
+        y1 = min(h, y0 + rows)
+        _decompose_tile(obs, target, components, unreached, residual, (y0, y1), inside_solver, outside_solver, unreached_light)
+    report(progress, len(tiles), len(tiles), "decomposed")
+    return Decomposition(components, unreached, target.copy(), constraint, unreached_light, residual)
+
+
+def observe(decomposition: Decomposition, *, kappa=None, order: int | None = None) -> np.ndarray:
+    """Synthesise the observations a decomposition predicts (the forward model, Eq. 6 and 9).
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+    kappa : float or (C,) array_like, optional
+        Weigh component i by ``κ^{i+1}`` first: the observations of the recolored scene,
+        as used by the recolored prediction of Sec. 5.
+    order : int, optional
+        Number of observations to synthesise (default: the decomposition's order).
+
+    Returns
+    -------
+    (order, H, W, C) float array
+        ``obs[0]`` the photograph, ``obs[r]`` the r-th re-emission capture with the
+        photograph's light removed.
+    """
+    comps = decomposition.components
+    k = decomposition.order
+    n_obs = k if order is None else check_order(order)
+    c = comps.shape[-1]
+    weights = np.ones((k, c))
+    if kappa is not None:
+        kap = check_kappa(kappa, c)
+        weights = kap[None, :] ** np.arange(1, k + 1)[:, None]
+    m = transport_matrix(max(n_obs, k))[:n_obs, :k]
+    obs = np.zeros((n_obs,) + comps.shape[1:], comps.dtype)
+    for r in range(n_obs):
+        for n in range(k):
+            # packed: inside and outside components share index n and weight κ^{n+1}
+            obs[r] += (m[r, n] * weights[n]).astype(comps.dtype) * comps[n]
+    obs[0] += decomposition.unreached
+    return obs
+
+
+def _check_observations(observations) -> np.ndarray:
+    obs = check_float_image("observations", observations, ndim=4)
+    k, h, w, c = obs.shape
+    if k < 1:
+        raise InputError(f"observations must hold at least the photograph (K >= 1), got K = {k} in shape {obs.shape}")
+    if k > MAX_ORDER:
+        raise InputError(f"observations hold K = {k} images; at most {MAX_ORDER} are supported")
+    if c not in (1, 3):
+        raise InputError(
+            f"observations must have 1 or 3 channels in the last axis (K, H, W, C), got shape {obs.shape}"
+        )
+    if h == 0 or w == 0:
+        raise InputError(f"observations have an empty image, shape {obs.shape}")
+    return obs.astype(float_dtype(obs), copy=False)
+
+
+def _decompose_tile(obs, target, components, unreached, residual, rows, inside_solver, outside_solver, unreached_light):
+    y0, y1 = rows
+    k, _, w, c = obs.shape
+    b = obs[:, y0:y1].reshape(k, -1)
+    comp_view = components[:, y0:y1].reshape(k, -1)
+    unr_view = unreached[y0:y1].reshape(-1)
+    inside = np.repeat(target[y0:y1].reshape(-1), c)
+    res_num = np.zeros(b.shape[1], np.float64)
+    for mask, solver in ((inside, inside_solver), (~inside, outside_solver)):
+        if not mask.any():
+            continue
+        cols = b[:, mask]
+        x = solver.solve(cols)
+        fit = solver.a.astype(cols.dtype) @ x - cols
+        res_num[mask] = np.einsum("ij,ij->j", fit, fit, dtype=np.float64)
+        if solver is inside_solver or not unreached_light:
+            comp_view[:, mask] = x
+        else:
+            unr_view[mask] = x[0]
+            comp_view[: k - 1, mask] = x[1:]
+    res_den = np.einsum("ij,ij->j", b, b, dtype=np.float64)
+    num = res_num.reshape(-1, c).sum(axis=1)
+    den = res_den.reshape(-1, c).sum(axis=1)
+    rel = np.sqrt(np.divide(num, den, out=np.zeros_like(num), where=den > 0))
+    residual[y0:y1] = rel.reshape(y1 - y0, w)
