@@ -15,7 +15,7 @@ from engine._checks import check_choice, check_float_image, check_kappa, check_m
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER, outside_matrix, transport_matrix
 from engine.progress import Progress, ShouldStop, checkpoint, report
-from engine.solve import ConeSolver, Constraint, cone_basis
+from engine.solve import ConeSolver, Constraint, cone_basis, solve_systems
 
 #: Pixels per tile: bounds the solver's working memory (~K·C·4·4 bytes per pixel).
 TILE_PIXELS = 1 << 18
@@ -258,22 +258,20 @@ def _decompose_tile(obs, target, components, unreached, residual, rows, inside_s
     y0, y1 = rows
     k, _, w, c = obs.shape
     b = obs[:, y0:y1].reshape(k, -1)
-    comp_view = components[:, y0:y1].reshape(k, -1)
-    unr_view = unreached[y0:y1].reshape(-1)
-    inside = np.repeat(target[y0:y1].reshape(-1), c)
+    selector = np.repeat(~target[y0:y1].reshape(-1), c).astype(np.int8)  # 0 inside, 1 outside
+    inside_rows = np.arange(k)
+    # outside unknowns are (L̄_d, C R^0 L_d, ...): L̄_d goes to `unreached` (row index k)
+    outside_rows = np.concatenate([[k], np.arange(k - 1)]) if unreached_light else inside_rows
     res_num = np.zeros(b.shape[1], np.float64)
-    for mask, solver in ((inside, inside_solver), (~inside, outside_solver)):
-        if not mask.any():
-            continue
-        cols = b[:, mask]
-        x = solver.solve(cols)
-        fit = solver.a.astype(cols.dtype) @ x - cols
-        res_num[mask] = np.einsum("ij,ij->j", fit, fit, dtype=np.float64)
-        if solver is inside_solver or not unreached_light:
-            comp_view[:, mask] = x
-        else:
-            unr_view[mask] = x[0]
-            comp_view[: k - 1, mask] = x[1:]
+    solve_systems(
+        b,
+        selector,
+        [inside_solver, outside_solver],
+        [inside_rows, outside_rows],
+        components[:, y0:y1].reshape(k, -1),
+        unreached[y0:y1].reshape(-1),
+        res_num,
+    )
     res_den = np.einsum("ij,ij->j", b, b, dtype=np.float64)
     num = res_num.reshape(-1, c).sum(axis=1)
     den = res_den.reshape(-1, c).sum(axis=1)

@@ -149,71 +149,66 @@ class ConeSolver:
         x_map = basis[:, free] * norms[free][None, :]
         return test, x_map
 
-    def solve(self, b: np.ndarray, *, sample: int = 2048) -> np.ndarray:
+    def solve(self, b: np.ndarray) -> np.ndarray:
         """Solve every column of ``b``.
 
         Parameters
         ----------
         b : (m, N) float32 or float64
             One right-hand side per column; may be a strided view.
-        sample : int
-            Number of evenly spaced columns used to rank the active sets by how often they
-            win (decides the order of the trials only, never the result).
 
         Returns
         -------
         (n, N) array of b's dtype
             The constrained least-squares solution ``x`` of every column.
         """
+        b = np.asarray(b)
         dtype = b.dtype if b.dtype.kind == "f" else np.dtype(np.float64)
-        m, count = b.shape
-        x = np.zeros((self.a.shape[1], count), dtype=dtype)
-        if count == 0:
-            return x
-        if self.basis is None:
-            x[:] = self._maps[0].astype(dtype) @ (self._tests[0].astype(dtype) @ b)
-            return x
-        tol = self._tol(dtype)
-        order = self._rank_sets(b, sample, tol)
-        remaining = np.arange(count)
-        rest = b
-        for idx in order:
-            if remaining.size == 0:
-                break
-            y = self._tests[idx].astype(dtype) @ rest
-            ok = (y >= -tol * np.abs(rest).max(axis=0)).all(axis=0)
-            if not ok.any():
-                continue
-            free = list(self._sets[idx])
-            if free:
-                x[:, remaining[ok]] = self._maps[idx].astype(dtype) @ y[free][:, ok]
-            keep = ~ok
-            remaining = remaining[keep]
-            rest = rest[:, keep]
-        if remaining.size:
-            x[:, remaining] = self._best_feasible(rest, tol).astype(dtype)
+        x = np.zeros((self.a.shape[1], b.shape[1]), dtype=dtype)
+        solve_systems(
+            b.astype(dtype, copy=False),
+            np.zeros(b.shape[1], np.int8),
+            [self],
+            [np.arange(self.a.shape[1])],
+            x,
+        )
         return x
 
-    def _tol(self, dtype: np.dtype) -> float:
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(tests (S, n, m), maps (S, n_x, n))`` for :func:`engine._kernels.kkt_columns`."""
+        n = self._g.shape[1]
+        maps = np.zeros((len(self._sets), self.a.shape[1], n))
+        for i, free in enumerate(self._sets):
+            maps[i][:, list(free)] = self._maps[i]
+        return np.stack(self._tests), maps
+
+    def tolerance(self, dtype) -> float:
+        """KKT tolerance used for columns stored as ``dtype`` (infinite: no constraint)."""
+        if self.basis is None:
+            return np.inf
         if self.tol is not None:
             return self.tol
         return 1e-6 if np.dtype(dtype) == np.float32 else 1e-10
 
-    def _rank_sets(self, b: np.ndarray, sample: int, tol: float) -> list[int]:
-        """Order active sets by how often each is optimal on evenly spaced columns."""
-        count = b.shape[1]
-        cols = np.unique(np.linspace(0, count - 1, min(sample, count)).astype(np.int64))
-        sub = np.asarray(b[:, cols], dtype=np.float64)
-        scale = np.abs(sub).max(axis=0) * tol
-        wins = np.zeros(len(self._sets), dtype=np.int64)
-        unsolved = np.ones(sub.shape[1], dtype=bool)
-        for i, test in enumerate(self._tests):
-            ok = unsolved & ((test @ sub) >= -scale).all(axis=0)
-            wins[i] = ok.sum()
-            unsolved &= ~ok
-        return [int(i) for i in np.argsort(-wins, kind="stable")]
+    def rank_sets(self, b: np.ndarray, tol: float, *, sample: int = 2048) -> np.ndarray:
+        """Order active sets by how often each is optimal on evenly spaced columns of ``b``.
 
-    def _best_feasible(self, b: np.ndarray, tol: float) -> np.ndarray:
+        The order only decides how many trials a column needs, never its result.
+        """
+        count = b.shape[1]
+        wins = np.zeros(len(self._sets), dtype=np.int64)
+        if count:
+            cols = np.unique(np.linspace(0, count - 1, min(sample, count)).astype(np.int64))
+            sub = np.asarray(b[:, cols], dtype=np.float64)
+            scale = np.abs(sub).max(axis=0) * tol
+            unsolved = np.ones(sub.shape[1], dtype=bool)
+            for i, test in enumerate(self._tests):
+                ok = unsolved & ((test @ sub) >= -scale).all(axis=0)
+                wins[i] = ok.sum()
+                unsolved &= ~ok
+        return np.argsort(-wins, kind="stable").astype(np.int64)
+
+    def best_feasible(self, b: np.ndarray, tol: float) -> np.ndarray:
         """Fallback for columns no KKT test accepted (rounding at degenerate optima).
 
         Among all active sets whose free variables are non-negative (within tolerance),
@@ -237,3 +232,59 @@ class ConeSolver:
             best[better] = resid[better]
             out[:, better] = basis[:, free] @ d_free[:, better]
         return out
+
+
+def solve_systems(b, selector, solvers, destinations, out, extra=None, residual=None) -> None:
+    """Solve each column of ``b`` with the solver ``selector`` names, writing in place.
+
+    Parameters
+    ----------
+    b : (m, N) float32 or float64
+        Right-hand sides (may be a strided view).
+    selector : (N,) integer
+        Index into ``solvers`` for each column.
+    solvers : sequence of ConeSolver
+        All with the same ``m`` and number of unknowns ``n_x``.
+    destinations : sequence of (n_x,) int
+        For each solver, the row of ``out`` receiving each unknown; ``n_x`` sends it to
+        ``extra`` instead (how the unreached light leaves the packed components).
+    out : (rows, N) float array, zero on entry
+    extra : (N,) float array, zero on entry, optional
+    residual : (N,) float64, optional
+        Receives the squared fit residual ``‖A x − b‖²`` of each column.
+
+    Notes
+    -----
+    The compiled kernel does the work in one pass; columns whose optimum is degenerate
+    enough that rounding defeats every KKT test (rare) are finished by
+    :meth:`ConeSolver.best_feasible`.
+    """
+    from engine._kernels import kkt_columns
+
+    count = b.shape[1]
+    nx = solvers[0].a.shape[1]
+    tol = solvers[0].tolerance(b.dtype)
+    if len({len(s._sets) for s in solvers}) != 1 or len({s.a.shape for s in solvers}) != 1:
+        raise InputError("solvers must share their shape and constraint kind")
+    arrays = [s.kernel_arrays() for s in solvers]
+    tests = np.stack([t for t, _ in arrays])
+    maps = np.stack([mp for _, mp in arrays])
+    orders = np.stack([s.rank_sets(b[:, selector == g], tol) for g, s in enumerate(solvers)])
+    dest = np.stack([np.asarray(d, np.int64) for d in destinations])
+    a = np.stack([s.a for s in solvers])
+    extra = np.zeros(count, out.dtype) if extra is None else extra
+    res = np.zeros(count, np.float64) if residual is None else residual
+    unresolved = np.zeros(count, np.bool_)
+    kkt_columns(b, np.asarray(selector, np.int64), tests, maps, orders, a, dest, tol, out, extra, res, unresolved)
+    if unresolved.any():
+        for g, solver in enumerate(solvers):
+            cols = np.flatnonzero(unresolved & (selector == g))
+            if cols.size == 0:
+                continue
+            x = solver.best_feasible(b[:, cols], tol)
+            res[cols] = np.sum((solver.a @ x - b[:, cols]) ** 2, axis=0)
+            for i, row in enumerate(destinations[g]):
+                if row == nx:
+                    extra[cols] = x[i]
+                else:
+                    out[row, cols] = x[i]
