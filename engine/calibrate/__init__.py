@@ -1,0 +1,1 @@
+"""Rig calibration maths: pure functions on captured arrays, no devices."""
