@@ -26,50 +26,59 @@ def kkt_columns(b, selector, tests, maps, orders, a, dest, tol, out, extra, resi
     n_sets = orders.shape[1]
     n = tests.shape[2]
     nx = maps.shape[2]
-    for j in prange(count):
-        g = selector[j]
+    chunk = 4096
+    for c in prange((count + chunk - 1) // chunk):
         col = np.empty(m)
-        scale = 0.0
-        for r in range(m):
-            col[r] = b[r, j]
-            if abs(col[r]) > scale:
-                scale = abs(col[r])
-        thr = -tol * scale
         y = np.empty(n)
-        x = np.zeros(nx)
-        found = False
-        for t in range(n_sets):
-            s = orders[g, t]
-            ok = True
-            for i in range(n):
-                acc = 0.0
-                for r in range(m):
-                    acc += tests[g, s, i, r] * col[r]
-                if acc < thr:
-                    ok = False
-                    break
-                y[i] = acc
-            if ok:
-                for i in range(nx):
-                    acc = 0.0
-                    for q in range(n):
-                        acc += maps[g, s, i, q] * y[q]
-                    x[i] = acc
-                found = True
+        x = np.empty(nx)
+        for j in range(c * chunk, min(count, (c + 1) * chunk)):
+            _solve_column(b, j, selector[j], tests, maps, orders, a, dest, tol, out, extra, residual, unresolved, col, y, x, n_sets)
+
+
+@njit(cache=True, inline="always")
+def _solve_column(b, j, g, tests, maps, orders, a, dest, tol, out, extra, residual, unresolved, col, y, x, n_sets):  # pragma: no cover - compiled
+    m = col.shape[0]
+    n = y.shape[0]
+    nx = x.shape[0]
+    scale = 0.0
+    for r in range(m):
+        col[r] = b[r, j]
+        if abs(col[r]) > scale:
+            scale = abs(col[r])
+    thr = -tol * scale
+    found = False
+    for t in range(n_sets):
+        s = orders[g, t]
+        ok = True
+        for i in range(n):
+            acc = 0.0
+            for r in range(m):
+                acc += tests[g, s, i, r] * col[r]
+            if acc < thr:
+                ok = False
                 break
-        if not found:
-            unresolved[j] = True
-            continue
-        res = 0.0
-        for r in range(m):
-            acc = -col[r]
+            y[i] = acc
+        if ok:
             for i in range(nx):
-                acc += a[g, r, i] * x[i]
-            res += acc * acc
-        residual[j] = res
+                acc = 0.0
+                for q in range(n):
+                    acc += maps[g, s, i, q] * y[q]
+                x[i] = acc
+            found = True
+            break
+    if not found:
+        unresolved[j] = True
+        return
+    res = 0.0
+    for r in range(m):
+        acc = -col[r]
         for i in range(nx):
-            d = dest[g, i]
-            if d == nx:
-                extra[j] = x[i]
-            else:
-                out[d, j] = x[i]
+            acc += a[g, r, i] * x[i]
+        res += acc * acc
+    residual[j] = res
+    for i in range(nx):
+        d = dest[g, i]
+        if d == nx:
+            extra[j] = x[i]
+        else:
+            out[d, j] = x[i]
