@@ -1,0 +1,184 @@
+"""The calibration of one rig, as one value that round-trips through JSON plus plain arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from engine.calibrate._common import check_image, check_resolution, wh
+from engine.calibrate.crosstalk import Crosstalk
+from engine.calibrate.graycode import Correspondence
+from engine.calibrate.response import ProjectorResponse
+from engine.errors import InputError
+
+__all__ = ["CALIBRATION_VERSION", "Calibration"]
+
+CALIBRATION_VERSION = 1
+_KIND = "albedit.calibration"
+#: Array names in :meth:`Calibration.to_dict` → (dtype, shape kind).
+_ARRAYS = {
+    "black_frame": (np.float32, "camera3"),
+    "correspondence_x": (np.int32, "camera"),
+    "correspondence_y": (np.int32, "camera"),
+    "correspondence_status": (np.uint8, "camera"),
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Everything measured about a rig that acquisition needs.
+
+    Attributes
+    ----------
+    rig_name : str
+        The rig it was made with, e.g. ``"virtual:cornell"``.
+    camera_resolution, projector_resolution : (H, W), (Hp, Wp)
+    black_frame : (H, W, 3) float32
+        Capture with the projector at black: ambient plus projector black light.
+    response : ProjectorResponse
+    correspondence : Correspondence
+        Camera→projector pixels.
+    crosstalk : Crosstalk or None
+    metadata : dict
+        JSON-serialisable facts (date, exposure, gain, settle delay, notes).
+    """
+
+    rig_name: str
+    camera_resolution: tuple[int, int]
+    projector_resolution: tuple[int, int]
+    black_frame: np.ndarray
+    response: ProjectorResponse
+    correspondence: Correspondence
+    crosstalk: Crosstalk | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.rig_name, str) or not self.rig_name:
+            raise InputError(f"rig_name must be a non-empty string, got {self.rig_name!r}")
+        cam = check_resolution("camera_resolution", self.camera_resolution)
+        proj = check_resolution("projector_resolution", self.projector_resolution)
+        black = check_image("black_frame", self.black_frame, cam + (3,)).astype(np.float32, copy=True)
+        black.flags.writeable = False
+        if not isinstance(self.response, ProjectorResponse):
+            raise InputError(f"response must be a ProjectorResponse, got {type(self.response).__name__}")
+        if not isinstance(self.correspondence, Correspondence):
+            raise InputError(f"correspondence must be a Correspondence, got {type(self.correspondence).__name__}")
+        if self.correspondence.camera_resolution != cam or self.correspondence.projector_resolution != proj:
+            raise InputError(
+                f"correspondence maps a {wh(self.correspondence.camera_resolution)} camera to a "
+                f"{wh(self.correspondence.projector_resolution)} projector, but the calibration is for camera "
+                f"{wh(cam)} and projector {wh(proj)}"
+            )
+        if self.crosstalk is not None and not isinstance(self.crosstalk, Crosstalk):
+            raise InputError(f"crosstalk must be a Crosstalk or None, got {type(self.crosstalk).__name__}")
+        object.__setattr__(self, "camera_resolution", cam)
+        object.__setattr__(self, "projector_resolution", proj)
+        object.__setattr__(self, "black_frame", black)
+        object.__setattr__(self, "metadata", dict(self.metadata))
+
+    def check_compatible(self, rig_name: str, camera_resolution, projector_resolution) -> None:
+        """Raise InputError saying why this calibration does not fit a rig.
+
+        Examples
+        --------
+        >>> cal = Calibration("virtual:box", (2, 2), (2, 2), np.zeros((2, 2, 3), np.float32),
+        ...                   ProjectorResponse.linear(), Correspondence.identity((2, 2)))
+        >>> cal.check_compatible("virtual:box", (2, 2), (2, 2))
+        >>> cal.check_compatible("virtual:box", (480, 640), (2, 2))
+        Traceback (most recent call last):
+        ...
+        engine.errors.InputError: calibration was made for camera 2×2, this rig's camera is 640×480; recalibrate
+        """
+        cam = check_resolution("camera_resolution", camera_resolution)
+        proj = check_resolution("projector_resolution", projector_resolution)
+        if rig_name != self.rig_name:
+            raise InputError(f"calibration was made for rig {self.rig_name!r}, this rig is {rig_name!r}; recalibrate")
+        if cam != self.camera_resolution:
+            raise InputError(
+                f"calibration was made for camera {wh(self.camera_resolution)}, this rig's camera is {wh(cam)}; recalibrate"
+            )
+        if proj != self.projector_resolution:
+            raise InputError(
+                f"calibration was made for projector {wh(self.projector_resolution)}, this rig's projector is "
+                f"{wh(proj)}; recalibrate"
+            )
+
+    def to_dict(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """Split into a JSON-serialisable description and named arrays (no pickle).
+
+        Returns
+        -------
+        meta : dict
+            JSON-ready; ``meta["arrays"]`` lists the array names with dtype and shape.
+        arrays : dict[str, ndarray]
+            ``black_frame`` (H, W, 3) float32, ``correspondence_x``/``_y`` (H, W) int32,
+            ``correspondence_status`` (H, W) uint8. Store them in any lossless format.
+        """
+        arrays = {
+            "black_frame": np.array(self.black_frame),
+            "correspondence_x": np.array(self.correspondence.x),
+            "correspondence_y": np.array(self.correspondence.y),
+            "correspondence_status": np.array(self.correspondence.status),
+        }
+        meta = {
+            "kind": _KIND,
+            "version": CALIBRATION_VERSION,
+            "rig_name": self.rig_name,
+            "camera_resolution": list(self.camera_resolution),
+            "projector_resolution": list(self.projector_resolution),
+            "response": self.response.to_dict(),
+            "crosstalk": None if self.crosstalk is None else self.crosstalk.to_dict(),
+            "metadata": self.metadata,
+            "arrays": {k: {"dtype": str(a.dtype), "shape": list(a.shape)} for k, a in arrays.items()},
+        }
+        return meta, arrays
+
+    @classmethod
+    def from_dict(cls, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> "Calibration":
+        """Rebuild from :meth:`to_dict`'s output, checking kind, version, dtypes and shapes.
+
+        Examples
+        --------
+        >>> cal = Calibration("virtual:box", (2, 3), (2, 3), np.ones((2, 3, 3), np.float32),
+        ...                   ProjectorResponse.linear(black_level=0.01), Correspondence.identity((2, 3)))
+        >>> back = Calibration.from_dict(*cal.to_dict())
+        >>> back.rig_name, back.response.black_level.tolist(), back.correspondence.x.tolist()
+        ('virtual:box', [0.01, 0.01, 0.01], [[0, 1, 2], [0, 1, 2]])
+        """
+        if not isinstance(meta, dict) or meta.get("kind") != _KIND:
+            raise InputError(f"meta is not an Albedit calibration (kind {meta.get('kind') if isinstance(meta, dict) else None!r})")
+        if meta.get("version") != CALIBRATION_VERSION:
+            raise InputError(
+                f"calibration version {meta.get('version')!r} is not supported (this Albedit reads version "
+                f"{CALIBRATION_VERSION}); recalibrate"
+            )
+        try:
+            cam = check_resolution("camera_resolution", meta["camera_resolution"])
+            proj = check_resolution("projector_resolution", meta["projector_resolution"])
+            shapes = {"camera": cam, "camera3": cam + (3,)}
+            got = {}
+            for name, (dtype, kind) in _ARRAYS.items():
+                if name not in arrays:
+                    raise InputError(f"arrays is missing {name!r}")
+                a = np.asarray(arrays[name])
+                if a.dtype != dtype or a.shape != shapes[kind]:
+                    raise InputError(
+                        f"arrays[{name!r}] must be {np.dtype(dtype)} of shape {shapes[kind]}, got {a.dtype} {a.shape}"
+                    )
+                got[name] = a
+            corr = Correspondence(got["correspondence_x"], got["correspondence_y"], got["correspondence_status"], proj)
+            xt = meta.get("crosstalk")
+            return cls(
+                rig_name=meta["rig_name"],
+                camera_resolution=cam,
+                projector_resolution=proj,
+                black_frame=got["black_frame"],
+                response=ProjectorResponse.from_dict(meta["response"]),
+                correspondence=corr,
+                crosstalk=None if xt is None else Crosstalk.from_dict(xt),
+                metadata=dict(meta.get("metadata") or {}),
+            )
+        except KeyError as e:
+            raise InputError(f"meta is missing {e.args[0]!r}; not a complete calibration") from None

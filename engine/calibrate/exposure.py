@@ -1,0 +1,170 @@
+"""Black/ambient frames and exposure checks, in plain words.
+
+Every acquisition subtracts a reference capture (the paper subtracts I_0, Sec. 3.3) and relies
+on linear, unclipped captures: these helpers average reference frames and say whether a
+capture is usable before hours are spent on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine._checks import check_mask
+from engine.calibrate._common import check_fraction, check_image, check_positive, check_stack
+from engine.errors import InputError
+
+__all__ = ["ExposureReport", "black_frame", "exposure_report"]
+
+
+def black_frame(captures) -> np.ndarray:
+    """Average captures of the same still light (e.g. projector black) into one frame.
+
+    Parameters
+    ----------
+    captures : (N, H, W, 3) float or a sequence of (H, W, 3) float
+        Linear radiance; N ≥ 1.
+
+    Returns
+    -------
+    (H, W, 3) float32
+        The mean (noise down by √N). Not clipped: noise may leave small negative values.
+
+    Examples
+    --------
+    >>> black_frame([np.zeros((1, 1, 3), np.float32), np.full((1, 1, 3), 2, np.float32)])[0, 0].tolist()
+    [1.0, 1.0, 1.0]
+    """
+    caps = check_stack("captures", captures)
+    return caps.mean(axis=0, dtype=np.float64).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class ExposureReport:
+    """How usable one capture is.
+
+    Attributes
+    ----------
+    pixels : int
+        Pixels judged (the target's, or all).
+    saturated_fraction : float or None
+        Fraction clipped in any channel; None when saturation could not be checked.
+    underexposed_fraction : float
+        Fraction whose brightest channel is below ``low × full scale``.
+    ambient_fraction : float or None
+        Median over pixels of black / image (light that is not the projector's), when a black
+        frame was given.
+    ok : bool
+        Within all limits.
+    verdict : str
+        ``"ok"``, ``"over-exposed"``, ``"under-exposed"``, ``"over- and under-exposed"``,
+        ``"too much ambient light"`` or ``"no pixels"``.
+    message : str
+        The verdict with numbers and what to do, in plain words.
+    """
+
+    pixels: int
+    saturated_fraction: float | None
+    underexposed_fraction: float
+    ambient_fraction: float | None
+    ok: bool
+    verdict: str
+    message: str
+
+    def __str__(self) -> str:
+        return self.message
+
+
+def exposure_report(
+    image,
+    *,
+    target=None,
+    saturated=None,
+    full_scale: float | None = None,
+    low: float = 0.02,
+    black=None,
+    max_saturated: float = 0.001,
+    max_underexposed: float = 0.05,
+    max_ambient: float = 0.5,
+) -> ExposureReport:
+    """Judge a capture: how much of it is clipped, how much is too dark, how much is ambient.
+
+    Parameters
+    ----------
+    image : (H, W, 3) float, linear radiance
+        Usually a capture under projector white.
+    target : (H, W) bool, optional
+        Judge only these pixels.
+    saturated : (H, W) bool, optional
+        Clipped pixels (``Frame.saturated``).
+    full_scale : float, optional
+        Radiance at which the camera clips. Without ``saturated``, pixels at or above it count
+        as saturated. Default: the brightest value of the judged pixels, so under-exposure is
+        then judged relative to the brightest pixel.
+    low : float
+        A pixel is under-exposed when its brightest channel is below ``low × full_scale``.
+    black : (H, W, 3) float, optional
+        A capture with the projector at black (see :func:`black_frame`): reports how much of
+        the image is ambient light.
+    max_saturated, max_underexposed, max_ambient : float
+        Limits for an ``ok`` verdict (fractions).
+
+    Returns
+    -------
+    ExposureReport
+
+    Examples
+    --------
+    >>> img = np.full((10, 10, 3), 0.5, np.float32); img[0, :3] = 0.001
+    >>> sat = np.zeros((10, 10), bool); sat[9, 9] = True
+    >>> print(exposure_report(img, saturated=sat, full_scale=1.0))
+    over-exposed: 1.0% of 100 pixels saturated, 3.0% under-exposed (below 2% of full scale); shorten the exposure or lower the gain
+    """
+    img = check_image("image", image)
+    h, w = img.shape[:2]
+    sel = np.ones((h, w), bool) if target is None else check_mask("target", target, (h, w))
+    low = float(check_fraction("low", low, channels=1)[0])
+    limits = {n: float(check_fraction(n, v, channels=1, upper_open=False)[0])
+              for n, v in (("max_saturated", max_saturated), ("max_underexposed", max_underexposed),
+                           ("max_ambient", max_ambient))}
+    n = int(sel.sum())
+    if n == 0:
+        return ExposureReport(0, None, 0.0, None, False, "no pixels", "no pixels to judge: the target is empty")
+    peak = img[sel].max(axis=-1)  # brightest channel per judged pixel
+    scale = float(peak.max()) if full_scale is None else check_positive("full_scale", full_scale)
+    if saturated is not None:
+        sat = check_mask("saturated", saturated, (h, w))[sel]
+        sat_frac: float | None = float(sat.mean())
+    elif full_scale is not None:
+        sat_frac = float(np.mean(peak >= scale))
+    else:
+        sat_frac = None
+    under = float(np.mean(peak < low * scale)) if scale > 0 else 1.0
+    amb = None
+    if black is not None:
+        blk = check_image("black", black, img.shape)[sel].max(axis=-1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(peak > 0, blk / peak, 1.0)
+        amb = float(np.median(ratio))
+
+    over_bad = sat_frac is not None and sat_frac > limits["max_saturated"]
+    under_bad = under > limits["max_underexposed"]
+    amb_bad = amb is not None and amb > limits["max_ambient"]
+    what = "target pixels" if target is not None else "pixels"
+    sat_txt = "saturation not checked (no saturation mask or full scale)" if sat_frac is None else f"{100 * sat_frac:.1f}% of {n} {what} saturated"
+    facts = f"{sat_txt}, {100 * under:.1f}% under-exposed (below {100 * low:.0f}% of full scale)"
+    if amb is not None:
+        facts += f", ambient light {100 * amb:.0f}% of the image"
+    if over_bad and under_bad:
+        verdict, advice = "over- and under-exposed", "the scene's range exceeds the camera's: use two exposures or even out the lighting"
+    elif over_bad:
+        verdict, advice = "over-exposed", "shorten the exposure or lower the gain"
+    elif under_bad:
+        verdict, advice = "under-exposed", "lengthen the exposure or raise the gain (or check the mask is on lit pixels)"
+    elif amb_bad:
+        verdict, advice = "too much ambient light", "darken the room: ambient light costs dynamic range and adds noise"
+    else:
+        verdict, advice = "ok", ""
+    message = f"{verdict}: {facts}" + (f"; {advice}" if advice else "")
+    return ExposureReport(n, sat_frac, under, amb, verdict == "ok", verdict, message)

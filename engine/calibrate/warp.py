@@ -1,0 +1,296 @@
+"""Warps between camera and projector pixels through a :class:`Correspondence`.
+
+Re-emission (paper Sec. 3.3) shows ``(I_{r-1} ∩ A) / D`` from the projector: a camera-space
+image turned into the projector image that lights each target point with the wanted value.
+The camera→projector map is the correspondence itself (``x``, ``y`` per camera pixel);
+its inverse is many-to-one, so projector pixels average the camera pixels that see them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from engine._checks import check_mask
+from engine.calibrate._common import check_resolution, wh
+from engine.calibrate.graycode import Correspondence
+from engine.errors import InputError
+
+__all__ = [
+    "ProjectorMap",
+    "estimate_hole_radius",
+    "projector_footprint",
+    "projector_to_camera_map",
+    "warp_to_camera",
+    "warp_to_projector",
+]
+
+
+def _check_correspondence(correspondence, projector_resolution=None) -> Correspondence:
+    if not isinstance(correspondence, Correspondence):
+        raise InputError(
+            f"correspondence must be an engine.calibrate.Correspondence (from decode_gray_code), "
+            f"got {type(correspondence).__name__}"
+        )
+    if projector_resolution is not None:
+        res = check_resolution("projector_resolution", projector_resolution)
+        if res != correspondence.projector_resolution:
+            raise InputError(
+                f"projector_resolution is {wh(res)} but the correspondence was decoded for a "
+                f"{wh(correspondence.projector_resolution)} projector"
+            )
+    return correspondence
+
+
+def _sources(correspondence: Correspondence, target) -> np.ndarray:
+    """(H, W) bool: camera pixels that take part (decoded, and in the target if given)."""
+    use = correspondence.valid
+    if target is not None:
+        use = use & check_mask("target", target, correspondence.camera_resolution)
+    return use
+
+
+@dataclass(frozen=True, eq=False)
+class ProjectorMap:
+    """The projector→camera map: mean camera position of each projector pixel.
+
+    Attributes
+    ----------
+    u, v : (Hp, Wp) float32
+        Mean camera column and row of the camera pixels that see each projector pixel; NaN
+        where none does.
+    count : (Hp, Wp) int32
+        How many camera pixels see each projector pixel (0 = not seen).
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    count: np.ndarray
+
+
+def projector_to_camera_map(correspondence: Correspondence, *, target=None) -> ProjectorMap:
+    """Invert a correspondence: for every projector pixel, the camera pixels that see it.
+
+    Parameters
+    ----------
+    correspondence : Correspondence
+        Camera→projector map from :func:`decode_gray_code`.
+    target : (H, W) bool, optional
+        Use only these camera pixels.
+
+    Returns
+    -------
+    ProjectorMap
+        Averaged camera coordinates (many camera pixels can see one projector pixel).
+
+    Examples
+    --------
+    >>> c = Correspondence.from_maps(np.array([[0, 0, 1]]), np.zeros((1, 3), int), np.ones((1, 3), bool), (1, 2))
+    >>> m = projector_to_camera_map(c)
+    >>> m.u.tolist(), m.count.tolist()
+    ([[0.5, 2.0]], [[2, 1]])
+    """
+    corr = _check_correspondence(correspondence)
+    use = _sources(corr, target)
+    hp, wp = corr.projector_resolution
+    idx = (corr.y[use].astype(np.int64) * wp + corr.x[use]).ravel()
+    vv, uu = np.nonzero(use)
+    count = np.bincount(idx, minlength=hp * wp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = (np.bincount(idx, weights=uu, minlength=hp * wp) / count).astype(np.float32)
+        v = (np.bincount(idx, weights=vv, minlength=hp * wp) / count).astype(np.float32)
+    return ProjectorMap(u.reshape(hp, wp), v.reshape(hp, wp), count.reshape(hp, wp).astype(np.int32))
+
+
+def estimate_hole_radius(correspondence: Correspondence, *, target=None) -> int:
+    """Radius (projector pixels) of the gaps between projector pixels hit by the camera.
+
+    A camera coarser than the projector leaves projector pixels that no camera pixel sees;
+    their spacing is estimated from neighbouring camera pixels (90th percentile of the
+    projector-space step), and half of it, rounded up, closes the gaps.
+
+    Examples
+    --------
+    >>> estimate_hole_radius(Correspondence.identity((4, 4)))
+    1
+    """
+    corr = _check_correspondence(correspondence)
+    use = _sources(corr, target)
+    x, y = corr.x.astype(np.float32), corr.y.astype(np.float32)
+    steps = []
+    for axis in (0, 1):
+        a = [slice(None)] * 2
+        b = [slice(None)] * 2
+        a[axis], b[axis] = slice(1, None), slice(None, -1)
+        both = use[tuple(a)] & use[tuple(b)]
+        d = np.maximum(np.abs(x[tuple(a)] - x[tuple(b)]), np.abs(y[tuple(a)] - y[tuple(b)]))
+        steps.append(d[both])
+    steps = np.concatenate(steps)
+    if steps.size == 0:
+        return 1
+    return max(1, int(np.ceil(np.percentile(steps, 90) / 2)))
+
+
+def projector_footprint(correspondence: Correspondence, *, target=None, radius: int | None = None) -> np.ndarray:
+    """Projector pixels that light the target: pixels seen by the camera, gaps closed.
+
+    Parameters
+    ----------
+    correspondence : Correspondence
+    target : (H, W) bool, optional
+        Camera pixels of the target; default all decoded pixels.
+    radius : int, optional
+        Closing radius in projector pixels; default :func:`estimate_hole_radius`. Gaps narrower than
+        ``2 · radius`` between seen projector pixels are part of the footprint.
+
+    Returns
+    -------
+    (Hp, Wp) bool
+        Use as ``mask_projector`` of :func:`high_frequency_patterns`.
+
+    Examples
+    --------
+    >>> c = Correspondence.from_maps(np.array([[0, 2]]), np.zeros((1, 2), int), np.ones((1, 2), bool), (1, 5))
+    >>> projector_footprint(c).astype(int).tolist()
+    [[1, 1, 1, 0, 0]]
+    """
+    corr = _check_correspondence(correspondence)
+    hit = projector_to_camera_map(corr, target=target).count > 0
+    r = estimate_hole_radius(corr, target=target) if radius is None else _check_radius(radius)
+    return _close(hit, r)
+
+
+def _check_radius(radius) -> int:
+    if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
+        raise InputError(f"hole_radius must be an integer ≥ 0 (projector pixels), got {radius!r}")
+    return int(radius)
+
+
+def _close(hit: np.ndarray, r: int) -> np.ndarray:
+    if r == 0:
+        return hit.copy()
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    # Pad so the closing neither grows nor shrinks the footprint at the image border.
+    padded = cv2.copyMakeBorder(hit.view(np.uint8), r, r, r, r, cv2.BORDER_REPLICATE)
+    closed = cv2.morphologyEx(padded, cv2.MORPH_CLOSE, k)
+    return closed[r:-r, r:-r].astype(bool)
+
+
+def warp_to_projector(
+    camera_image,
+    correspondence: Correspondence,
+    projector_resolution=None,
+    *,
+    target=None,
+    fill_holes: bool = True,
+    hole_radius: int | None = None,
+) -> np.ndarray:
+    """Turn a camera-space image into the projector image that re-emits it.
+
+    Parameters
+    ----------
+    camera_image : (H, W, C) or (H, W) float
+        Values per camera pixel (e.g. ``I / D`` on the target), any sign, not clipped.
+    correspondence : Correspondence
+        Camera→projector map from :func:`decode_gray_code`.
+    projector_resolution : (Hp, Wp), optional
+        Checked against the correspondence's when given.
+    target : (H, W) bool, optional
+        Camera pixels to re-emit; default every decoded pixel. Other pixels are ignored.
+    fill_holes : bool
+        Give projector pixels inside the target's footprint that no camera pixel sees the
+        average of their seen neighbours (within ``hole_radius``). Pixels outside the
+        footprint stay 0.
+    hole_radius : int, optional
+        Default :func:`estimate_hole_radius` of the correspondence.
+
+    Returns
+    -------
+    (Hp, Wp, C) or (Hp, Wp) float32
+        Projector image; the average of the camera pixels that see each projector pixel, 0
+        where nothing is to be emitted. Not clipped and not linearised: scale, then pass
+        through :meth:`ProjectorResponse.linearize`.
+
+    Notes
+    -----
+    Camera pixels that are not decoded cannot be re-emitted; find them with
+    ``correspondence.missing(target)`` and report them.
+
+    Examples
+    --------
+    >>> c = Correspondence.from_maps(np.array([[0, 0, 2]]), np.zeros((1, 3), int), np.ones((1, 3), bool), (1, 4))
+    >>> warp_to_projector(np.array([[1.0, 3.0, 5.0]], np.float32), c).tolist()
+    [[2.0, 3.5, 5.0, 0.0]]
+    """
+    corr = _check_correspondence(correspondence, projector_resolution)
+    img = np.asarray(camera_image)
+    if img.dtype.kind != "f":
+        raise InputError(f"camera_image must be a floating-point image, got dtype {img.dtype}")
+    if img.shape[:2] != corr.camera_resolution or img.ndim not in (2, 3):
+        raise InputError(
+            f"camera_image must have shape {corr.camera_resolution} or {corr.camera_resolution + ('C',)} "
+            f"(the correspondence's camera), got {img.shape}"
+        )
+    if not np.all(np.isfinite(img)):
+        raise InputError("camera_image contains NaN or inf; expected finite values")
+    plane = img.ndim == 2
+    img3 = img[..., None] if plane else img
+    use = _sources(corr, target)
+    hp, wp = corr.projector_resolution
+    idx = (corr.y[use].astype(np.int64) * wp + corr.x[use]).ravel()
+    count = np.bincount(idx, minlength=hp * wp).reshape(hp, wp)
+    hit = count > 0
+    vals = img3[use]
+    out = np.zeros((hp, wp, img3.shape[2]), np.float32)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for c in range(img3.shape[2]):
+            s = np.bincount(idx, weights=vals[:, c], minlength=hp * wp).reshape(hp, wp)
+            out[..., c] = np.where(hit, s / count, 0.0)
+    if fill_holes and hit.any():
+        r = estimate_hole_radius(corr, target=target) if hole_radius is None else _check_radius(hole_radius)
+        holes = _close(hit, r) & ~hit
+        if r > 0 and holes.any():
+            size = (2 * r + 1, 2 * r + 1)
+            w = cv2.boxFilter(hit.astype(np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+            for c in range(out.shape[2]):
+                s = cv2.boxFilter(out[..., c], -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+                out[..., c][holes] = s[holes] / w[holes]  # w > 0: every closed pixel is within r of a hit
+    return out[..., 0] if plane else out
+
+
+def warp_to_camera(projector_image, correspondence: Correspondence, *, fill: float = 0.0) -> np.ndarray:
+    """Sample a projector-space image at every camera pixel's projector pixel.
+
+    Parameters
+    ----------
+    projector_image : (Hp, Wp, C) or (Hp, Wp) float
+    correspondence : Correspondence
+    fill : float
+        Value for camera pixels without a projector pixel.
+
+    Returns
+    -------
+    (H, W, C) or (H, W) float32
+        What each camera pixel's surface point receives from the projector.
+
+    Examples
+    --------
+    >>> c = Correspondence.from_maps(np.array([[1, 0]]), np.zeros((1, 2), int), np.array([[True, False]]), (1, 2))
+    >>> warp_to_camera(np.array([[7.0, 9.0]]), c, fill=-1).tolist()
+    [[9.0, -1.0]]
+    """
+    corr = _check_correspondence(correspondence)
+    img = np.asarray(projector_image)
+    if img.dtype.kind != "f":
+        raise InputError(f"projector_image must be a floating-point image, got dtype {img.dtype}")
+    if img.shape[:2] != corr.projector_resolution or img.ndim not in (2, 3):
+        raise InputError(
+            f"projector_image must have shape {corr.projector_resolution}[+ (C,)] (the correspondence's "
+            f"projector), got {img.shape}"
+        )
+    ok = corr.valid
+    out = img[np.where(ok, corr.y, 0), np.where(ok, corr.x, 0)].astype(np.float32)
+    out[~ok] = np.float32(fill)
+    return out
