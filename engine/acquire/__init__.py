@@ -1,0 +1,23 @@
+"""Capture plans: calibration runs, single-target acquisition (Sec. 3.3, 6), cascades (Sec. 4)
+and adaptive capture (Sec. 5). Everything talks to a rig through :class:`Recorder` only."""
+
+from engine.acquire.emission import Emission, Emitter, Negative
+from engine.acquire.recorder import Recorder
+from engine.acquire.rig_calibration import calibrate_rig, calibration_budget
+from engine.acquire.single import Acquisition, CaptureSettings, acquire_single, reemit
+from engine.acquire.target import PreparedTarget, prepare_target
+
+__all__ = [
+    "Acquisition",
+    "CaptureSettings",
+    "Emission",
+    "Emitter",
+    "Negative",
+    "PreparedTarget",
+    "Recorder",
+    "acquire_single",
+    "calibrate_rig",
+    "calibration_budget",
+    "prepare_target",
+    "reemit",
+]

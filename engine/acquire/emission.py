@@ -1,0 +1,150 @@
+"""Turning wanted direct radiance on the target into projector patterns (Sec. 3.3 and 6).
+
+To make the direct outgoing radiance of target pixel x equal ``I(x)``, the projector must
+show ``I(x) / D(x)`` at the projector pixel that lights x (Sec. 3.3). Two steps of Sec. 6
+widen the dynamic range: the pattern is scaled by ``τ / max`` before it is shown and the
+capture divided by the same factor afterwards, and successive re-emissions send differences
+``I_r − I_{r-1}`` (Eq. 12-14). Each channel is emitted on its own projector primary by
+default (the paper's choice, immune to colour crosstalk).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from engine.calibrate import Correspondence, ProjectorResponse, warp_to_projector
+from engine.errors import InputError
+
+
+class Negative(StrEnum):
+    """What to do with negative wanted radiance (noise in re-emitted differences).
+
+    ``clamp``: emit zero there and count the pixels. ``split``: emit the positive and the
+    negative parts as two patterns and subtract the captures (transport is linear).
+    """
+
+    CLAMP = "clamp"
+    SPLIT = "split"
+
+
+@dataclass(frozen=True)
+class Emission:
+    """One projector pattern to show, and how to read its capture back.
+
+    Attributes
+    ----------
+    pattern : (Hp, Wp, 3) float32
+        Projector input in [0, 1], through the inverse response.
+    channels : tuple of int
+        Camera channels this capture measures (one for per-channel emission).
+    scale : float
+        The ``τ / max`` factor applied: divide the capture by it.
+    sign : int
+        +1, or -1 for the negative part of a split emission.
+    name : str
+        Suffix naming the capture within its step (``"r"``, ``"g-neg"``, ``"rgb"``).
+    """
+
+    pattern: np.ndarray
+    channels: tuple[int, ...]
+    scale: float
+    sign: int
+    name: str
+
+
+@dataclass(frozen=True, eq=False)
+class Emitter:
+    """How to re-emit camera-space radiance onto one target.
+
+    Parameters
+    ----------
+    correspondence : Correspondence
+        Camera→projector pixels of the rig.
+    direct : (H, W, 3) float32
+        D: direct outgoing radiance per unit of linear projector light (Sec. 3.3), measured
+        per projector primary when ``per_channel``.
+    target : (H, W) bool
+        The emittable target (D usable, correspondence decoded).
+    response : ProjectorResponse or None
+        Maps linear light fractions to projector input; None for a linear projector.
+    per_channel : bool
+        Emit each channel on its own primary (3 captures a step) or all at once (1 capture).
+    tau : float
+        Largest linear light fraction emitted (Sec. 6, step 1), in (0, 1].
+    negative : {"clamp", "split"}
+    """
+
+    correspondence: Correspondence
+    direct: np.ndarray
+    target: np.ndarray
+    response: ProjectorResponse | None = None
+    per_channel: bool = True
+    tau: float = 1.0
+    negative: str = Negative.CLAMP
+
+    def __post_init__(self) -> None:
+        if not 0.0 < float(self.tau) <= 1.0:
+            raise InputError(f"tau must be in (0, 1] (a fraction of the projector's range), got {self.tau}")
+        Negative(self.negative)
+
+    def emissions(self, wanted: np.ndarray) -> tuple[list[Emission], int]:
+        """Projector patterns that make the target's direct radiance equal ``wanted``.
+
+        Parameters
+        ----------
+        wanted : (H, W, 3) float
+            Camera-space radiance wanted on the target (ignored elsewhere).
+
+        Returns
+        -------
+        emissions : list of Emission
+            Empty channels (all zero) are skipped: their capture would be pure noise.
+        clamped : int
+            Number of target pixel-channels whose negative value was emitted as zero.
+        """
+        t = self.target[:, :, None]
+        d = np.where(t, self.direct, 1.0)
+        light = np.where(t, wanted / d, 0.0).astype(np.float32)  # linear projector light, camera space
+        clamped = int(np.count_nonzero((light < 0) & t))
+        if self.negative == Negative.SPLIT:
+            parts = [(np.maximum(light, 0), 1, ""), (np.maximum(-light, 0), -1, "-neg")]
+            clamped = 0
+        else:
+            parts = [(np.maximum(light, 0), 1, "")]
+        groups = [((c,), "rgb"[c]) for c in range(3)] if self.per_channel else [((0, 1, 2), "rgb")]
+        out = []
+        for part, sign, suffix in parts:
+            for channels, label in groups:
+                plane = np.zeros_like(part)
+                plane[..., channels] = part[..., channels]
+                peak = float(plane.max())
+                if peak <= 0:
+                    continue
+                scale = self.tau / peak
+                proj = warp_to_projector(plane * scale, self.correspondence, target=self.target)
+                proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
+                if self.response is not None:
+                    proj = self.response.linearize(proj)
+                out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix))
+        return out, clamped
+
+    @staticmethod
+    def combine(emissions: list[Emission], captures: list[np.ndarray], base: np.ndarray) -> np.ndarray:
+        """Undo scaling, signs and channel splitting: the radiance the wanted emission causes.
+
+        Parameters
+        ----------
+        emissions : list of Emission
+        captures : list of (H, W, 3) float
+            One capture per emission.
+        base : (H, W, 3) float
+            The light present without emission (removed from every capture).
+        """
+        out = np.zeros(base.shape, np.float32)
+        for em, cap in zip(emissions, captures):
+            ch = list(em.channels)
+            out[..., ch] += (em.sign / em.scale) * (cap[..., ch] - base[..., ch])
+        return out

@@ -1,0 +1,113 @@
+"""Showing a pattern and capturing it, once: the only place acquisition touches a rig.
+
+Every capture has a name that is a pure function of the plan (``"r2-g"``, ``"gray-017"``).
+With a session, a capture already on disk is read back instead of taken again, after
+checking that it was taken with the same pattern: re-running an interrupted plan on the same
+session therefore resumes it exactly where it stopped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.errors import SessionError
+from engine.progress import Progress, ShouldStop, checkpoint, report
+from engine.session import Session, pattern_hash
+
+
+@dataclass
+class Recorder:
+    """Take named captures through a rig, persisting them in an optional session.
+
+    Parameters
+    ----------
+    rig : object
+        Anything with ``rig.projector.show(image)`` and ``rig.camera.capture() -> Frame``
+        (the protocols of ``devices.base``; the engine does not import ``devices``).
+    session : Session, optional
+        Where captures are written the moment they arrive, and read back on resume.
+    progress : callable, optional
+        ``progress(step, total, message)``; ``total`` is :attr:`planned` as last set.
+    should_stop : callable, optional
+        Checked before every capture; a stop raises :class:`engine.errors.Cancelled` and
+        loses nothing already captured.
+    on_capture : callable, optional
+        ``on_capture(name, image)`` after each capture (e.g. thumbnails in the app).
+
+    Attributes
+    ----------
+    taken, reused : list of str
+        Names captured now, and names read back from the session.
+    planned : int
+        Number of captures the current plan expects (for progress).
+    """
+
+    rig: object
+    session: Session | None = None
+    progress: Progress | None = None
+    should_stop: ShouldStop | None = None
+    on_capture: object = None
+    taken: list[str] = field(default_factory=list)
+    reused: list[str] = field(default_factory=list)
+    planned: int = 0
+
+    @property
+    def count(self) -> int:
+        """Captures obtained so far (taken now or reused)."""
+        return len(self.taken) + len(self.reused)
+
+    def capture(self, name: str, pattern: np.ndarray, *, meta: dict | None = None) -> np.ndarray:
+        """Show ``pattern`` and capture, or reuse the session's capture ``name``.
+
+        Parameters
+        ----------
+        name : str
+            Stable name of this capture within the plan.
+        pattern : (Hp, Wp, 3) float32
+            Projector image in [0, 1] (already through the inverse response).
+        meta : dict, optional
+            JSON facts stored with the capture (step, channel, scale, ...).
+
+        Returns
+        -------
+        (H, W, 3) float32
+            Linear radiance.
+
+        Raises
+        ------
+        SessionError
+            The session has a capture of that name taken with a different pattern (the plan
+            changed since: start a new session).
+        Cancelled
+            ``should_stop()`` returned True before the capture.
+        """
+        pid = pattern_hash(pattern)
+        if self.session is not None and self.session.has_capture(name):
+            record = self.session.capture_record(name)
+            if record.pattern_id != pid:
+                raise SessionError(
+                    f"capture {name!r} in {self.session.path} was taken with a different projector pattern; "
+                    "the acquisition settings changed since: use a new session folder"
+                )
+            image = self.session.read_capture(name)
+            self.reused.append(name)
+        else:
+            checkpoint(self.should_stop, "acquisition")
+            report(self.progress, self.count, self.planned, f"capturing {name}")
+            self.rig.projector.show(pattern)
+            frame = self.rig.camera.capture()
+            image = np.asarray(frame.image, np.float32)
+            if self.session is not None:
+                self.session.add_frame(name, frame, pattern_id=pid, meta=meta or {})
+            self.taken.append(name)
+        if self.on_capture is not None:
+            self.on_capture(name, image)
+        report(self.progress, self.count, max(self.planned, self.count), f"captured {name}")
+        return image
+
+    def black(self) -> np.ndarray:
+        """A black projector image of the rig's projector resolution."""
+        hp, wp = self.rig.projector.resolution
+        return np.zeros((hp, wp, 3), np.float32)

@@ -1,0 +1,107 @@
+"""Running a rig's calibration: the captures behind :class:`engine.calibrate.Calibration`.
+
+Order: black frame, white frame (exposure check), Gray code (correspondences, and the mask
+of projector-lit pixels), projector response ramp on those pixels, optionally crosstalk.
+Every capture goes through a :class:`Recorder`, so an interrupted calibration resumes.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+
+import numpy as np
+
+from engine.acquire.recorder import Recorder
+from engine.calibrate import (
+    Calibration,
+    crosstalk_patterns,
+    decode_gray_code,
+    exposure_report,
+    fit_crosstalk,
+    fit_response,
+    gray_code_patterns,
+    ramp_levels,
+    response_patterns,
+)
+from engine.errors import InputError
+
+
+def calibration_budget(projector_resolution, *, levels: int = 17, crosstalk: bool = False) -> int:
+    """Number of captures :func:`calibrate_rig` takes."""
+    gray = len(gray_code_patterns(projector_resolution))
+    return 2 + gray + levels + (len(crosstalk_patterns(projector_resolution)) if crosstalk else 0)
+
+
+def calibrate_rig(
+    recorder: Recorder,
+    *,
+    rig_name: str,
+    levels: int = 17,
+    crosstalk: bool = False,
+) -> Calibration:
+    """Calibrate a camera–projector rig.
+
+    Parameters
+    ----------
+    recorder : Recorder
+        Wraps the rig (and the session the captures go to).
+    rig_name : str
+        Recorded in the calibration; a calibration is refused for another rig.
+    levels : int
+        Grey levels of the projector response ramp.
+    crosstalk : bool
+        Also measure the 3×3 projector-primary → camera-channel matrix.
+
+    Returns
+    -------
+    Calibration
+        With ``metadata["exposure"]`` (the exposure report as text) and coverage counts.
+
+    Raises
+    ------
+    InputError
+        The camera sees no projector light, the ramp is not monotonic, nothing decodes —
+        each with a message in plain words.
+    Cancelled
+        The recorder's ``should_stop`` fired; finished captures stay in the session.
+    """
+    rig = recorder.rig
+    cam_res = tuple(rig.camera.resolution)
+    proj_res = tuple(rig.projector.resolution)
+    recorder.planned = calibration_budget(proj_res, levels=levels, crosstalk=crosstalk)
+    black = recorder.capture("cal-black", recorder.black(), meta={"kind": "calibration"})
+    white = recorder.capture("cal-white", np.ones(proj_res + (3,), np.float32), meta={"kind": "calibration"})
+    if float(np.percentile(white - black, 99)) <= 0.01 * max(float(np.percentile(white, 99.9)), 1e-30):
+        raise InputError(
+            "the camera saw no change between projector black and white: is the projector on, "
+            "pointed at the scene, and the camera's exposure long enough?"
+        )
+    report_ = exposure_report(white)
+    gray = gray_code_patterns(proj_res)
+    gray_caps = [recorder.capture(f"cal-gray-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(gray)]
+    corr = decode_gray_code(gray_caps, proj_res)
+    if not corr.valid.any():
+        raise InputError("no camera pixel decoded the Gray code: check focus, exposure and that the projector lights the scene")
+    lv = ramp_levels(levels)
+    ramp = [recorder.capture(f"cal-ramp-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(response_patterns(lv, proj_res))]
+    response = fit_response(np.stack(ramp), lv, mask=corr.valid)
+    xtalk = None
+    if crosstalk:
+        prim = [recorder.capture(f"cal-primary-{i}", p, meta={"kind": "calibration"}) for i, p in enumerate(crosstalk_patterns(proj_res))]
+        xtalk = fit_crosstalk(np.stack(prim), black=black, mask=corr.valid)
+    return Calibration(
+        rig_name=rig_name,
+        camera_resolution=cam_res,
+        projector_resolution=proj_res,
+        black_frame=black,
+        response=response,
+        correspondence=corr,
+        crosstalk=xtalk,
+        metadata={
+            "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "exposure": str(report_),
+            "coverage": corr.summary(),
+            "exposure_s": float(getattr(rig.camera, "exposure", 0.0) or 0.0),
+            "gain": float(getattr(rig.camera, "gain", 1.0) or 1.0),
+        },
+    )
