@@ -47,9 +47,8 @@ def high_frequency_patterns(
         blur leaves the square centres fully lit.
     shifts : int
         Shifts per square side along each axis (1 … period / 2). The sequence has
-        ``2 · shifts²`` patterns: x offsets ``round(i · s / shifts)`` for i in 0 … 2·shifts − 1
-        (the second half are the complements) times y offsets for i in 0 … shifts − 1, with
-        ``s = period / 2``.
+        ``2 · shifts²`` patterns: offsets ``o_i = round(i · s / shifts)``, i in 0 … shifts − 1,
+        ``s = period / 2``; x offsets ``o_i`` and ``o_i + s`` (the complements), y offsets ``o_i``.
 
     Returns
     -------
@@ -81,8 +80,8 @@ def high_frequency_patterns(
             )
         if not mask.any():
             raise InputError("mask_projector lights no projector pixel; the target's footprint is empty")
-    ox = [round(i * side / shifts) for i in range(2 * shifts)]
-    oy = [round(j * side / shifts) for j in range(shifts)]
+    oy = [round(i * side / shifts) for i in range(shifts)]
+    ox = oy + [o + side for o in oy]  # the second half are the complements
     combos = [(dx, dy) for dy in oy for dx in ox]
     names = [f"checker period {period} shift x{dx} y{dy}" for dx, dy in combos]
     yy, xx = np.ogrid[:hp, :wp]

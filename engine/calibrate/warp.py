@@ -171,7 +171,7 @@ def _check_radius(radius) -> int:
 def _close(hit: np.ndarray, r: int) -> np.ndarray:
     if r == 0:
         return hit.copy()
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    k = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * r + 1, 2 * r + 1))
     # Pad so the closing neither grows nor shrinks the footprint at the image border.
     padded = cv2.copyMakeBorder(hit.view(np.uint8), r, r, r, r, cv2.BORDER_REPLICATE)
     closed = cv2.morphologyEx(padded, cv2.MORPH_CLOSE, k)
