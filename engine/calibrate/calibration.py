@@ -94,10 +94,13 @@ class Calibration:
         cam = check_resolution("camera_resolution", camera_resolution)
         proj = check_resolution("projector_resolution", projector_resolution)
         if rig_name != self.rig_name:
-            raise InputError(f"calibration was made for rig {self.rig_name!r}, this rig is {rig_name!r}; recalibrate")
+            raise InputError(
+                f"calibration was made for rig {self.rig_name!r}, this rig is {rig_name!r}; recalibrate"
+            )
         if cam != self.camera_resolution:
             raise InputError(
-                f"calibration was made for camera {wh(self.camera_resolution)}, this rig's camera is {wh(cam)}; recalibrate"
+                f"calibration was made for camera {wh(self.camera_resolution)}, this rig's camera is "
+                f"{wh(cam)}; recalibrate"
             )
         if proj != self.projector_resolution:
             raise InputError(
@@ -148,7 +151,8 @@ class Calibration:
         ('virtual:box', [0.01, 0.01, 0.01], [[0, 1, 2], [0, 1, 2]])
         """
         if not isinstance(meta, dict) or meta.get("kind") != _KIND:
-            raise InputError(f"meta is not an Albedit calibration (kind {meta.get('kind') if isinstance(meta, dict) else None!r})")
+            kind = meta.get("kind") if isinstance(meta, dict) else None
+            raise InputError(f"meta is not an Albedit calibration (kind {kind!r}, expected {_KIND!r})")
         if meta.get("version") != CALIBRATION_VERSION:
             raise InputError(
                 f"calibration version {meta.get('version')!r} is not supported (this Albedit reads version "
@@ -165,10 +169,13 @@ class Calibration:
                 a = np.asarray(arrays[name])
                 if a.dtype != dtype or a.shape != shapes[kind]:
                     raise InputError(
-                        f"arrays[{name!r}] must be {np.dtype(dtype)} of shape {shapes[kind]}, got {a.dtype} {a.shape}"
+                        f"arrays[{name!r}] must be {np.dtype(dtype)} of shape {shapes[kind]}, "
+                        f"got {a.dtype} {a.shape}"
                     )
                 got[name] = a
-            corr = Correspondence(got["correspondence_x"], got["correspondence_y"], got["correspondence_status"], proj)
+            corr = Correspondence(
+                got["correspondence_x"], got["correspondence_y"], got["correspondence_status"], proj
+            )
             xt = meta.get("crosstalk")
             return cls(
                 rig_name=meta["rig_name"],

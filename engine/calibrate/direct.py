@@ -175,7 +175,10 @@ def direct_image(captures, *, black_fraction=0.0, ambient=None, target=None) -> 
     if b.ndim == 0:
         b = np.full(3, float(b))
     if b.shape != (3,) or not np.all(np.isfinite(b)) or np.any(b < 0) or np.any(b >= 1):
-        raise InputError(f"black_fraction must be a scalar or (3,) in [0, 1) (projector black / white), got {np.asarray(black_fraction).tolist()}")
+        raise InputError(
+            "black_fraction must be a scalar or (3,) in [0, 1) (projector black / white), "
+            f"got {np.asarray(black_fraction).tolist()}"
+        )
     hi = caps.max(axis=0).astype(dtype)
     lo = caps.min(axis=0).astype(dtype)
     if ambient is not None:

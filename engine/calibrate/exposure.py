@@ -13,7 +13,6 @@ import numpy as np
 
 from engine._checks import check_mask
 from engine.calibrate._common import check_fraction, check_image, check_positive, check_stack
-from engine.errors import InputError
 
 __all__ = ["ExposureReport", "black_frame", "exposure_report"]
 
@@ -118,8 +117,11 @@ def exposure_report(
     --------
     >>> img = np.full((10, 10, 3), 0.5, np.float32); img[0, :3] = 0.001
     >>> sat = np.zeros((10, 10), bool); sat[9, 9] = True
-    >>> print(exposure_report(img, saturated=sat, full_scale=1.0))
-    over-exposed: 1.0% of 100 pixels saturated, 3.0% under-exposed (below 2% of full scale); shorten the exposure or lower the gain
+    >>> r = exposure_report(img, saturated=sat, full_scale=1.0)
+    >>> r.verdict, r.saturated_fraction, r.underexposed_fraction
+    ('over-exposed', 0.01, 0.03)
+    >>> print(r.message.split("; ")[1])
+    shorten the exposure or lower the gain
     """
     img = check_image("image", image)
     h, w = img.shape[:2]
@@ -152,18 +154,24 @@ def exposure_report(
     under_bad = under > limits["max_underexposed"]
     amb_bad = amb is not None and amb > limits["max_ambient"]
     what = "target pixels" if target is not None else "pixels"
-    sat_txt = "saturation not checked (no saturation mask or full scale)" if sat_frac is None else f"{100 * sat_frac:.1f}% of {n} {what} saturated"
+    if sat_frac is None:
+        sat_txt = "saturation not checked (no saturation mask or full scale)"
+    else:
+        sat_txt = f"{100 * sat_frac:.1f}% of {n} {what} saturated"
     facts = f"{sat_txt}, {100 * under:.1f}% under-exposed (below {100 * low:.0f}% of full scale)"
     if amb is not None:
         facts += f", ambient light {100 * amb:.0f}% of the image"
     if over_bad and under_bad:
-        verdict, advice = "over- and under-exposed", "the scene's range exceeds the camera's: use two exposures or even out the lighting"
+        verdict = "over- and under-exposed"
+        advice = "the scene's range exceeds the camera's: use two exposures or even out the lighting"
     elif over_bad:
         verdict, advice = "over-exposed", "shorten the exposure or lower the gain"
     elif under_bad:
-        verdict, advice = "under-exposed", "lengthen the exposure or raise the gain (or check the mask is on lit pixels)"
+        verdict = "under-exposed"
+        advice = "lengthen the exposure or raise the gain (or check the mask is on lit pixels)"
     elif amb_bad:
-        verdict, advice = "too much ambient light", "darken the room: ambient light costs dynamic range and adds noise"
+        verdict = "too much ambient light"
+        advice = "darken the room: ambient light costs dynamic range and adds noise"
     else:
         verdict, advice = "ok", ""
     message = f"{verdict}: {facts}" + (f"; {advice}" if advice else "")

@@ -148,11 +148,14 @@ class Correspondence:
         object.__setattr__(self, "projector_resolution", res)
         x, y, s = (np.asarray(a) for a in (self.x, self.y, self.status))
         if x.ndim != 2 or x.shape != y.shape or x.shape != s.shape:
-            raise InputError(f"x, y and status must be (H, W) arrays of one shape, got {x.shape}, {y.shape}, {s.shape}")
+            raise InputError(
+                f"x, y and status must be (H, W) arrays of one shape, got {x.shape}, {y.shape}, {s.shape}"
+            )
         if x.dtype.kind not in "iu" or y.dtype.kind not in "iu" or s.dtype.kind not in "iu":
             raise InputError(f"x, y and status must be integer arrays, got {x.dtype}, {y.dtype}, {s.dtype}")
         if s.size and (s.min() < 0 or s.max() > max(PixelStatus)):
-            raise InputError(f"status must hold PixelStatus codes 0..{int(max(PixelStatus))}, got {s.min()}..{s.max()}")
+            top = int(max(PixelStatus))
+            raise InputError(f"status must hold PixelStatus codes 0..{top}, got {s.min()}..{s.max()}")
         ok = s == PixelStatus.DECODED
         hp, wp = res
         if np.any(ok & ((x < 0) | (x >= wp) | (y < 0) | (y >= hp))):
@@ -253,7 +256,8 @@ class Correspondence:
             f"{c['low_contrast']} low contrast" if c["low_contrast"] else "",
             f"{c['out_of_range']} outside the projector's range" if c["out_of_range"] else "",
         ]
-        return f"{bad} of {total} {where} ({100 * bad / max(total, 1):.1f}%) undecoded: " + ", ".join(p for p in parts if p)
+        share = 100 * bad / max(total, 1)
+        return f"{bad} of {total} {where} ({share:.1f}%) undecoded: " + ", ".join(p for p in parts if p)
 
 
 def _as_grey(name: str, image, shape=None) -> np.ndarray:
@@ -265,7 +269,9 @@ def _as_grey(name: str, image, shape=None) -> np.ndarray:
     elif a.ndim != 2:
         raise InputError(f"{name} must be grey (H, W) or RGB (H, W, 3), got shape {a.shape}")
     if shape is not None and a.shape != shape:
-        raise InputError(f"{name} has shape {a.shape[:2]}, but the first pattern capture has {shape}: all captures must match")
+        raise InputError(
+            f"{name} has shape {a.shape[:2]}, but the first pattern capture has {shape}: all captures must match"
+        )
     return a
 
 

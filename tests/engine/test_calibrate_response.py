@@ -92,7 +92,8 @@ def test_projector_not_visible():
     lv = ramp_levels(9)
     rng = np.random.default_rng(3)
     caps = (0.3 + rng.normal(0, 0.002, (9,) + SHAPE + (3,))).astype(np.float32)
-    with pytest.raises(InputError, match="camera saw no change between projector black and white.*projector on and pointed at"):
+    message = "camera saw no change between projector black and white.*projector on and pointed at"
+    with pytest.raises(InputError, match=message):
         fit_response(caps, lv)
 
 
