@@ -59,6 +59,40 @@ def check_stack(name: str, images, *, min_count: int = 1) -> np.ndarray:
     return stack
 
 
+def check_images(name: str, images, *, min_count: int = 1) -> list[np.ndarray]:
+    """Return ``images`` as a list of finite floating ``(H, W, 3)`` arrays of one shape.
+
+    Nothing is stacked or copied (a stacked ``(N, H, W, 3)`` array gives views), so callers
+    can reduce captures one at a time with bounded memory.
+    """
+    if isinstance(images, np.ndarray):
+        if images.ndim != 4:
+            raise InputError(f"{name} must be images of shape (H, W, 3) (stacked: (N, H, W, 3)), got {images.shape}")
+        items = list(images)
+    else:
+        try:
+            items = [np.asarray(im) for im in images]
+        except TypeError:
+            raise InputError(f"{name} must be a sequence of (H, W, 3) images, got {type(images).__name__}") from None
+    if len(items) < min_count:
+        raise InputError(f"{name} must hold at least {min_count} images, got {len(items)}")
+    shape = items[0].shape
+    for i, im in enumerate(items):
+        if im.shape != shape:
+            raise InputError(f"{name}: all images must have the same shape, got {shape} and {im.shape} (image {i})")
+        if im.ndim != 3 or im.shape[-1] != 3:
+            raise InputError(f"{name} must be images of shape (H, W, 3), got {im.shape}")
+        if im.dtype.kind != "f":
+            raise InputError(
+                f"{name} must be floating-point linear radiance, got dtype {im.dtype}; "
+                "convert integer captures with engine.imageio (which removes black level and scale)"
+            )
+        if not np.all(np.isfinite(im)):
+            bad = int(im.size - np.count_nonzero(np.isfinite(im)))
+            raise InputError(f"{name}[{i}] contains {bad} non-finite values (NaN or inf); expected finite radiance")
+    return items
+
+
 def check_image(name: str, image, shape: tuple[int, ...] | None = None) -> np.ndarray:
     """Return a finite floating ``(H, W, 3)`` image, optionally of exactly ``shape``."""
     image = np.asarray(image)

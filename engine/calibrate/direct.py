@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine._checks import check_mask
-from engine.calibrate._common import Patterns, check_image, check_resolution, check_stack
+from engine.calibrate._common import Patterns, check_image, check_images, check_resolution
 from engine.errors import InputError
 
 __all__ = ["DirectImage", "direct_image", "high_frequency_patterns"]
@@ -133,8 +133,8 @@ def direct_image(captures, *, black_fraction=0.0, ambient=None, target=None) -> 
 
     Parameters
     ----------
-    captures : (N, H, W, 3) float, linear radiance
-        One capture per pattern (any order).
+    captures : (N, H, W, 3) float or a sequence of N (H, W, 3) float, linear radiance
+        One capture per pattern (any order); reduced one at a time, never stacked.
     black_fraction : float or (3,) float
         ``b``, light of an unlit projector pixel relative to a lit one, per camera channel:
         ``ProjectorResponse.black_level``. In [0, 1).
@@ -169,8 +169,8 @@ def direct_image(captures, *, black_fraction=0.0, ambient=None, target=None) -> 
     >>> round(float(d.direct[0, 0, 0]), 4), round(float(d.global_light[0, 0, 0]), 4)
     (0.6, 0.2)
     """
-    caps = check_stack("captures", captures, min_count=2)
-    dtype = np.float64 if caps.dtype == np.float64 else np.float32
+    caps = check_images("captures", captures, min_count=2)
+    dtype = np.float64 if any(c.dtype == np.float64 for c in caps) else np.float32
     b = np.asarray(black_fraction, dtype=np.float64)
     if b.ndim == 0:
         b = np.full(3, float(b))
@@ -179,17 +179,20 @@ def direct_image(captures, *, black_fraction=0.0, ambient=None, target=None) -> 
             "black_fraction must be a scalar or (3,) in [0, 1) (projector black / white), "
             f"got {np.asarray(black_fraction).tolist()}"
         )
-    hi = caps.max(axis=0).astype(dtype)
-    lo = caps.min(axis=0).astype(dtype)
+    hi = caps[0].astype(dtype)  # running max/min: one capture in memory at a time
+    lo = hi.copy()
+    for c in caps[1:]:
+        np.maximum(hi, c, out=hi)
+        np.minimum(lo, c, out=lo)
     if ambient is not None:
-        amb = check_image("ambient", ambient, caps.shape[1:]).astype(dtype)
+        amb = check_image("ambient", ambient, caps[0].shape).astype(dtype)
         hi -= amb
         lo -= amb
     bb = b.astype(dtype)
     direct = (hi - lo) / (1 - bb)
     glob = 2 * (lo - bb * hi) / (1 - bb * bb)
     if target is not None:
-        sel = check_mask("target", target, caps.shape[1:3])
+        sel = check_mask("target", target, caps[0].shape[:2])
         direct[~sel] = 0
         glob[~sel] = 0
     return DirectImage(direct.astype(dtype, copy=False), glob.astype(dtype, copy=False), b)

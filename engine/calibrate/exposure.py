@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine._checks import check_mask
-from engine.calibrate._common import check_fraction, check_image, check_positive, check_stack
+from engine.calibrate._common import check_fraction, check_image, check_images, check_positive
 
 __all__ = ["ExposureReport", "black_frame", "exposure_report"]
 
@@ -35,8 +35,11 @@ def black_frame(captures) -> np.ndarray:
     >>> black_frame([np.zeros((1, 1, 3), np.float32), np.full((1, 1, 3), 2, np.float32)])[0, 0].tolist()
     [1.0, 1.0, 1.0]
     """
-    caps = check_stack("captures", captures)
-    return caps.mean(axis=0, dtype=np.float64).astype(np.float32)
+    caps = check_images("captures", captures)
+    total = np.zeros(caps[0].shape, np.float64)
+    for c in caps:
+        total += c
+    return (total / len(caps)).astype(np.float32)
 
 
 @dataclass(frozen=True)

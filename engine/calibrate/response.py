@@ -15,7 +15,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 
 from engine._checks import check_choice, check_mask
-from engine.calibrate._common import Patterns, check_fraction, check_image, check_resolution, check_stack
+from engine.calibrate._common import Patterns, check_fraction, check_image, check_images, check_resolution
 from engine.errors import InputError
 
 __all__ = ["ProjectorResponse", "RampChannels", "fit_response", "ramp_levels", "response_patterns"]
@@ -300,8 +300,9 @@ def fit_response(
 
     Parameters
     ----------
-    captures : (M, H, W, 3) float, linear radiance
-        One capture per pattern, in pattern order (M = N, or 3·N for ``"separate"``).
+    captures : (M, H, W, 3) float or a sequence of M (H, W, 3) float, linear radiance
+        One capture per pattern, in pattern order (M = N, or 3·N for ``"separate"``). A list
+        is reduced one capture at a time, never stacked.
     levels : (N,) float
         The levels the patterns were made with.
     channels : {"together", "separate"}
@@ -348,20 +349,20 @@ def fit_response(
     """
     lv = _check_levels(levels)
     mode = RampChannels(check_choice("channels", channels, RampChannels))
-    caps = check_stack("captures", captures)
+    caps = check_images("captures", captures)
     n = lv.size
     expected = n if mode is RampChannels.TOGETHER else 3 * n
-    if caps.shape[0] != expected:
+    if len(caps) != expected:
         raise InputError(
-            f"captures: expected {expected} captures for {n} levels with channels={mode.value!r}, got {caps.shape[0]}"
+            f"captures: expected {expected} captures for {n} levels with channels={mode.value!r}, got {len(caps)}"
         )
-    h, w = caps.shape[1:3]
+    h, w = caps[0].shape[:2]
     sel = np.ones((h, w), bool) if mask is None else check_mask("mask", mask, (h, w))
     if not sel.any():
         raise InputError("mask selects no camera pixels; expected the projector-lit part of the scene")
     ref = np.zeros(3)
     if ambient is not None:
-        ref = check_image("ambient", ambient, caps.shape[1:])[sel].sum(axis=0, dtype=np.float64)
+        ref = check_image("ambient", ambient, caps[0].shape)[sel].sum(axis=0, dtype=np.float64)
     npix = int(sel.sum())
     # Sums over the mask, (M, 3) in float64: no float32 accumulation error over megapixels.
     sums = np.stack([c[sel].sum(axis=0, dtype=np.float64) for c in caps])

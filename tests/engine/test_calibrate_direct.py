@@ -58,6 +58,8 @@ def test_recovers_direct_and_global(b):
     np.testing.assert_allclose(d.direct, ld, atol=0.002)
     np.testing.assert_allclose(d.global_light, lg, atol=0.002)
     np.testing.assert_allclose(d.per_input, (1 - b) * ld, atol=0.002)
+    from_list = direct_image(list(caps), black_fraction=b, ambient=amb)
+    np.testing.assert_array_equal(from_list.direct, d.direct)
     # Without the black-level correction the direct image is measurably wrong when b > 0.
     if b.max() > 0:
         naive = direct_image(caps, ambient=amb)
