@@ -4,11 +4,18 @@ and adaptive capture (Sec. 5). Everything talks to a rig through :class:`Recorde
 from engine.acquire.emission import Emission, Emitter, Negative
 from engine.acquire.recorder import Recorder
 from engine.acquire.rig_calibration import calibrate_rig, calibration_budget
-from engine.acquire.single import Acquisition, CaptureSettings, acquire_single, reemit
+from engine.acquire.cascade import CascadeResult, acquire_cascade, acquire_single
+from engine.acquire.predict import Adaptive, Policy, Predictor
+from engine.acquire.steps import Acquisition, CaptureSettings, reemit
 from engine.acquire.target import PreparedTarget, prepare_target
 
 __all__ = [
     "Acquisition",
+    "Adaptive",
+    "CascadeResult",
+    "Policy",
+    "Predictor",
+    "acquire_cascade",
     "CaptureSettings",
     "Emission",
     "Emitter",

@@ -10,95 +10,14 @@ tests/devices do the same with real geometry.
 import numpy as np
 import pytest
 
-from engine.acquire import CaptureSettings, PreparedTarget, Recorder, acquire_single
-from engine.calibrate import Calibration, Correspondence, ProjectorResponse
+from engine.acquire import CaptureSettings, Recorder, acquire_single
+from engine.calibrate import Calibration
 from engine.decompose import decompose
 from engine.errors import Cancelled, InputError, SessionError
 from engine.recolor import recolor
 from engine.session import Session
 
-H, W, C = 8, 10, 3
-GAMMA = 2.2
-
-
-class _Frame:
-    def __init__(self, image):
-        self.image, self.exposure, self.gain, self.black_level = image, 1.0, 1.0, 0.0
-        self.saturated = np.zeros(image.shape[:2], bool)
-        self.metadata = {}
-
-
-class PatchRig:
-    """Exact co-axial camera-projector stand-in; counts what it was asked to do."""
-
-    name = "patch-rig"
-
-    def __init__(self, seed=0, *, ambient=True):
-        rng = np.random.default_rng(seed)
-        n = H * W
-        self.target = np.zeros((H, W), bool)
-        self.target[2:6, 3:7] = True
-        t = self.target.ravel()
-        g = rng.random((n, n)) ** 3
-        g[np.ix_(t, t)] *= 12
-        g = (g + g.T) / 2
-        np.fill_diagonal(g, 0)
-        self.f = g * 0.85 / g.sum(axis=1).max()
-        self.albedo = rng.uniform(0.1, 0.8, (n, C))
-        self.albedo[t] = rng.uniform(0.05, 0.45, (t.sum(), C))
-        self.emission = np.zeros((n, C))
-        if ambient:
-            lights = rng.choice(np.flatnonzero(~t), 6, replace=False)
-            self.emission[lights] = rng.uniform(1.0, 5.0, (6, C))
-        self.gain = rng.uniform(0.5, 1.5, n)  # projector irradiance factor per pixel
-        self.direct = (self.albedo * self.gain[:, None]).reshape(H, W, C)
-        self.camera = self
-        self.projector = self
-        self.resolution = (H, W)
-        self.bit_depth = 8
-        self.exposure = 1.0
-        self.shown = np.zeros((H, W, C), np.float32)
-        self.captures = 0
-
-    def show(self, image):
-        assert image.shape == (H, W, 3) and image.min() >= 0 and image.max() <= 1
-        self.shown = image
-
-    def capture(self):
-        self.captures += 1
-        light = self.shown.astype(np.float64) ** GAMMA  # the projector's response
-        e = self.emission + (self.direct * light).reshape(-1, C)
-        return _Frame(self.solve(self.albedo, e).reshape(H, W, C).astype(np.float32))
-
-    def solve(self, albedo, e):
-        n = self.f.shape[0]
-        return np.stack([np.linalg.solve(np.eye(n) - albedo[:, c, None] * self.f, e[:, c]) for c in range(C)], 1)
-
-    def truth(self, kappa, *, projector_light=0.0):
-        """The scene with the target's albedo scaled, ambient on, the projector at ``projector_light``."""
-        a = self.albedo.copy()
-        a[self.target.ravel()] *= kappa
-        e = self.emission + a * self.gain[:, None] * projector_light
-        return self.solve(a, e).reshape(H, W, C)
-
-
-def _calibration(rig):
-    levels = np.linspace(0, 1, 257)
-    table = np.repeat((levels**GAMMA)[:, None], 3, axis=1)
-    return Calibration(
-        rig_name=rig.name,
-        camera_resolution=(H, W),
-        projector_resolution=(H, W),
-        black_frame=np.zeros((H, W, 3), np.float32),
-        response=ProjectorResponse(levels, table, np.zeros(3)),
-        correspondence=Correspondence.identity((H, W)),
-    )
-
-
-def _prepared(rig):
-    t = rig.target
-    return PreparedTarget(t.copy(), np.zeros_like(t), np.where(t[:, :, None], rig.direct, 0).astype(np.float32))
-
+from .conftest import GAMMA, H, W, C, PatchRig, stand_in_calibration as _calibration, exact_prepared as _prepared
 
 @pytest.mark.parametrize("per_channel", [True, False])
 @pytest.mark.parametrize("differences", [True, False])

@@ -1,0 +1,303 @@
+"""Multi-target acquisition: Algorithm 1 of the paper generalised to T targets (Sec. 4).
+
+Targets are recolored in a user-given order. The κ of every target but the last is fixed
+before capture, because it shapes the light emitted afterwards; the last target's κ stays
+free. ``recolored(ℓ, lighting)`` — the scene under ``lighting`` with targets ``0..ℓ-1``
+recolored — is, for ℓ = 0, a capture; for ℓ ≥ 1, a decomposition of target ℓ-1 from
+``recolored(ℓ-1, ·)`` observations (the photograph under ``lighting``, then re-emissions on
+target ℓ-1), recolored with its fixed κ. The last target's observations are
+``recolored(T-1, ·)`` of its own re-emissions. Brute force costs K^T images; a single
+target (T = 1) is Sec. 3.3's K images.
+
+Adaptive capture (Sec. 5) replaces captures by predictions from every light already emitted
+on the same target (:mod:`engine.acquire.predict`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine._checks import check_kappa, check_order
+from engine.acquire.emission import Emitter
+from engine.acquire.predict import Adaptive, Policy, Predictor, relative_error
+from engine.acquire.recorder import Recorder
+from engine.acquire.steps import Acquisition, CaptureSettings, reemit
+from engine.acquire.target import PreparedTarget, pattern_budget, prepare_target
+from engine.calibrate import Calibration
+from engine.decompose import decompose
+from engine.errors import InputError
+from engine.figurate import MAX_ORDER
+from engine.recolor import recolor
+
+
+@dataclass(frozen=True, eq=False)
+class CascadeResult:
+    """What a cascade produced: the last target's acquisition and the bookkeeping.
+
+    Attributes
+    ----------
+    acquisition : Acquisition
+        Observations of the last target, with the earlier targets recolored by their fixed κ
+        — decompose them with the last target's mask and recolor with its free κ.
+    targets : list of (str, PreparedTarget)
+        Every target in cascade order.
+    fixed_kappa : list of (3,) float
+        κ of targets 0..T-2, fixed before capture (the app locks their sliders).
+    images : int
+        Observation images captured (the paper's count; a per-channel image is 3 camera shots).
+    predicted : int
+        Observation images predicted instead of captured.
+    captures : int
+        Camera shots taken for observations (D measurement excluded).
+    """
+
+    acquisition: Acquisition
+    targets: list
+    fixed_kappa: list
+    images: int
+    predicted: int
+    captures: int
+    log: list = field(default_factory=list)
+
+
+class _Sequence:
+    """State of one decomposition's sequence (for the paper's validated linear policy)."""
+
+    def __init__(self) -> None:
+        self.trusted = False
+
+
+class _Plan:
+    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix):
+        self.recorder = recorder
+        self.prepared = prepared
+        self.kappas = kappas
+        self.order = order
+        self.settings = settings
+        self.adaptive = adaptive
+        self.photograph = photograph
+        self.base = base
+        self.prefix = prefix
+        self.emitters = [
+            Emitter(calibration.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau, settings.negative)
+            for p in prepared
+        ]
+        self.predictors = [Predictor(p.mask) for p in prepared]
+        self.log: list[dict] = []
+        self.clamped = 0
+
+    def respond(self, target: int, wanted: np.ndarray, path: str, seq: _Sequence) -> np.ndarray:
+        """The scene's response to emitting ``wanted`` on ``target`` (base light removed)."""
+        predictor = self.predictors[target]
+        policy = Policy(self.adaptive.policy)
+        guess = predictor.predict(wanted) if policy is not Policy.BRUTE else None
+        use_guess = guess is not None and (
+            (policy is Policy.SPAN and guess.bound < self.adaptive.threshold) or (policy is Policy.LINEAR and seq.trusted)
+        )
+        if use_guess:
+            self.log.append({"path": path, "target": target, "source": "predicted", "captures": [], "bound": guess.bound})
+            return guess.image
+        image, names, clamped = reemit(self.recorder, self.emitters[target], wanted, self.base, name=f"{self.prefix}-{path}")
+        self.clamped += clamped
+        entry = {"path": path, "target": target, "source": "captured", "captures": names}
+        if guess is not None:
+            entry["prediction_error"] = relative_error(guess.image, image)
+            if policy is Policy.LINEAR and entry["prediction_error"] < self.adaptive.threshold:
+                seq.trusted = True
+        self.log.append(entry)
+        predictor.add(wanted, image)
+        return image
+
+    def observations(self, level: int, target: int, lighting, path: str) -> np.ndarray:
+        """The K observations of ``target`` under ``lighting``, targets < level recolored."""
+        seq = _Sequence()
+        obs = [self.recolored(level, lighting, f"{path}.0" if path else "photograph")]
+        for s in range(1, self.order):
+            diff = self.settings.differences and s >= 2
+            wanted = obs[s - 1] - obs[s - 2] if diff else obs[s - 1]
+            sub = f"{path}.{s}" if path else f"r{s}"
+            light = self.recolored(level, (target, wanted, seq), sub)
+            obs.append(light + obs[s - 1] if diff else light)
+        return np.stack(obs).astype(np.float32)
+
+    def recolored(self, level: int, lighting, path: str) -> np.ndarray:
+        """The scene under ``lighting`` (None: the photograph's) with targets < level recolored."""
+        if level == 0:
+            if lighting is None:
+                return self.photograph
+            target, wanted, seq = lighting
+            return self.respond(target, wanted, path, seq)
+        t = level - 1
+        obs = self.observations(t, t, lighting, path)
+        d = decompose(obs, self.prepared[t].mask)
+        return recolor(d, self.kappas[t])
+
+
+def acquire_cascade(
+    recorder: Recorder,
+    calibration: Calibration,
+    targets,
+    order: int,
+    *,
+    fixed_kappa=(),
+    settings: CaptureSettings = CaptureSettings(),
+    adaptive: Adaptive | None = None,
+    photograph_pattern: np.ndarray | None = None,
+    prepared=None,
+    prefix: str = "acq",
+) -> CascadeResult:
+    """Capture the observations of the last of several targets, earlier targets recolored.
+
+    Parameters
+    ----------
+    recorder : Recorder
+    calibration : Calibration
+    targets : sequence of (name, (H, W) bool)
+        In cascade order; the last one's κ stays free.
+    order : int
+        K, the decomposition order of every target.
+    fixed_kappa : sequence of float or (3,)
+        κ of every target but the last, fixed before capture (Sec. 4).
+    settings : CaptureSettings
+    adaptive : Adaptive, optional
+        Prediction policy and threshold (Sec. 5); None captures everything (brute force).
+    photograph_pattern : (Hp, Wp, 3) float32, optional
+        Projector image lighting the photograph (default black; then the photograph is the
+        reference light removed from re-emissions, else a black capture is).
+    prepared : sequence of PreparedTarget, optional
+        D and emittable masks already measured for these targets on this rig.
+    prefix : str
+        Capture-name prefix.
+
+    Returns
+    -------
+    CascadeResult
+
+    Raises
+    ------
+    InputError
+        No targets, duplicate names, overlapping targets, a wrong number of fixed κ.
+    Cancelled
+        Stopped on request; a rerun with the same session resumes.
+    """
+    k = check_order(order)
+    if k > MAX_ORDER:
+        raise InputError(f"order must be at most {MAX_ORDER}, got {k}")
+    targets = [(str(n), np.asarray(m)) for n, m in targets]
+    if not targets:
+        raise InputError("targets is empty: give at least one (name, mask)")
+    names = [n for n, _ in targets]
+    if len(set(names)) != len(names):
+        raise InputError(f"target names must be unique, got {names}")
+    if len(fixed_kappa) != len(targets) - 1:
+        raise InputError(
+            f"fixed_kappa must give the κ of every target but the last ({len(targets) - 1}), got {len(fixed_kappa)}"
+        )
+    kappas = [check_kappa(kap, 3, name=f"fixed_kappa[{i}]") for i, kap in enumerate(fixed_kappa)]
+    total = np.zeros(calibration.camera_resolution, int)
+    for _, m in targets:
+        total += m.astype(bool)
+    if (total > 1).any():
+        raise InputError("targets overlap: a pixel may belong to one target only")
+    rig = recorder.rig
+    calibration.check_compatible(getattr(rig, "name", calibration.rig_name), tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+    adaptive = adaptive or Adaptive(Policy.BRUTE)
+    t_count = len(targets)
+    d_cost = 0 if prepared is not None else t_count * pattern_budget(settings.per_channel)
+    recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + (k**t_count - 1) * settings.captures_per_step()
+    photo_pattern = recorder.black() if photograph_pattern is None else np.asarray(photograph_pattern, np.float32)
+    photograph = recorder.capture(f"{prefix}-photograph", photo_pattern, meta={"kind": "photograph"})
+    base = photograph if photograph_pattern is None else recorder.capture(f"{prefix}-black", recorder.black(), meta={"kind": "black"})
+    if prepared is None:
+        prepared = [
+            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{n}", per_channel=settings.per_channel)
+            for n, m in targets
+        ]
+    plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)
+    last = t_count - 1
+    obs = plan.observations(last, last, None, "")
+    captured = [e for e in plan.log if e["source"] == "captured"]
+    predicted = [e for e in plan.log if e["source"] == "predicted"]
+    acq_log = [{"index": 0, "source": "photograph", "captures": [f"{prefix}-photograph"]}] + [
+        {"index": i + 1, **e} for i, e in enumerate(plan.log)
+    ]
+    acquisition = Acquisition(obs, prepared[last], base, plan.clamped, acq_log)
+    return CascadeResult(
+        acquisition=acquisition,
+        targets=list(zip(names, prepared)),
+        fixed_kappa=[kap.tolist() for kap in kappas],
+        images=1 + len(captured),
+        predicted=len(predicted),
+        captures=1 + sum(len(e["captures"]) for e in captured),
+        log=acq_log,
+    )
+
+
+def acquire_single(
+    recorder: Recorder,
+    calibration: Calibration,
+    target,
+    order: int,
+    *,
+    settings: CaptureSettings = CaptureSettings(),
+    photograph_pattern: np.ndarray | None = None,
+    prepared: PreparedTarget | None = None,
+    adaptive=None,
+    name: str = "target",
+) -> Acquisition:
+    """Capture the observations of one target (Sec. 3.3).
+
+    Parameters
+    ----------
+    recorder : Recorder
+        The rig, session, progress and cancellation.
+    calibration : Calibration
+        Of this rig (checked).
+    target : (H, W) bool
+        The painted target in camera pixels.
+    order : int
+        K: the photograph plus K-1 re-emissions.
+    settings : CaptureSettings
+    photograph_pattern : (Hp, Wp, 3) float32, optional
+        What the projector shows for the photograph (e.g. a flood, the paper's Fig. 7-8
+        lighting); default black. When given, re-emissions are shown without it and a
+        projector-black capture is the light removed.
+    prepared : PreparedTarget, optional
+        D and the emittable mask from an earlier :func:`prepare_target` of the same target
+        on the same rig; measured now when None.
+    adaptive : engine.acquire.predict.Adaptive, optional
+        Predict re-emissions instead of capturing them (Sec. 5).
+    name : str
+        Capture-name prefix.
+
+    Returns
+    -------
+    Acquisition
+
+    Raises
+    ------
+    InputError
+        Bad order, a calibration of another rig, a target the projector cannot reach.
+    Cancelled
+        Stopped on request; captures so far are in the session and a rerun resumes.
+
+    Notes
+    -----
+    The one-target case of :func:`acquire_cascade`. Costs 1
+    photograph (+1 black with ``photograph_pattern``), ``pattern_budget`` captures for D,
+    and K-1 re-emissions of ``settings.captures_per_step()`` captures each.
+    """
+    result = acquire_cascade(
+        recorder,
+        calibration,
+        [(name, target)],
+        order,
+        settings=settings,
+        adaptive=adaptive,
+        photograph_pattern=photograph_pattern,
+        prepared=None if prepared is None else [prepared],
+        prefix=name,
+    )
+    return result.acquisition
