@@ -1,0 +1,394 @@
+"""The canvas: shows frames, target overlays and tool feedback; zoom, pan, split divider.
+
+Qt mouse events become plain :class:`app.painting.MouseEvent` in camera-pixel coordinates and
+go to the :class:`~app.painting.Painter`; the canvas itself never edits masks. Pan with the
+middle button or with Space held; zoom with the wheel (around the cursor), Fit and 100 %.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import QPointF, QRectF, Qt, Signal
+from PySide6.QtGui import QBrush, QColor, QFont, QImage, QLinearGradient, QMouseEvent, QPainter, QPen, QPolygonF
+from PySide6.QtWidgets import QWidget
+
+from app.model import Document
+from app.painting import EventType, MouseEvent, Painter, Tool
+from app.render import Frame, View
+
+_BACKGROUND = QColor(38, 38, 40)
+_OVERLAY_ALPHA = 105
+_CURRENT_ALPHA = 140
+
+
+def _qimage(words: np.ndarray) -> QImage:
+    """Wrap (h, w) uint32 0xFFRRGGBB words without copying (the array must outlive the image)."""
+    h, w = words.shape
+    return QImage(words.data, w, h, 4 * w, QImage.Format.Format_RGB32)
+
+
+class Canvas(QWidget):
+    """Image view with painting.
+
+    Signals
+    -------
+    cursor_moved(object)
+        ``(x, y)`` camera pixel under the cursor, or None when it leaves the image.
+    zoom_changed(float)
+        Screen pixels per camera pixel.
+    """
+
+    cursor_moved = Signal(object)
+    zoom_changed = Signal(float)
+
+    MIN_ZOOM, MAX_ZOOM = 1.0 / 64.0, 64.0
+
+    def __init__(self, document: Document, painter: Painter, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.setMouseTracking(True)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.setMinimumSize(320, 240)
+        self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
+        self.doc = document
+        self.painter = painter
+        self.frame: Frame | None = None
+        self._images: tuple[QImage, QImage | None] | None = None
+        self.zoom = 1.0
+        self.offset = QPointF(0.0, 0.0)  # widget position of camera pixel (0, 0)
+        self._extent: tuple[int, int] = document.shape
+        self._fitted = True
+        self.split = 0.5  # split-view divider, fraction of the image width
+        self.show_overlays = True
+        self._overlay = np.zeros(document.shape, np.uint32)
+        self._overlay_image = QImage(self._overlay.data, document.shape[1], document.shape[0], 4 * document.shape[1],
+                                     QImage.Format.Format_ARGB32_Premultiplied)
+        self._mouse: QPointF | None = None
+        self._pan_from: tuple[QPointF, QPointF] | None = None
+        self._space = False
+        self._dragging_split = False
+        self._painting = False
+        self.paint_count = 0  # frames painted (benchmarks wait on it)
+        self.painted_request = 0
+        ev = document.events
+        ev.mask.connect(self._on_mask)
+        ev.targets.connect(self._rebuild_overlay)
+        ev.current.connect(lambda _uid: self._rebuild_overlay())
+        self._rebuild_overlay()
+
+    # ------------------------------------------------------------------ frames and geometry
+    def set_frame(self, frame: Frame) -> None:
+        """Show ``frame`` (keeps a reference: the QImages wrap its arrays)."""
+        extent_changed = tuple(frame.extent) != self._extent
+        self.frame = frame
+        second = _qimage(frame.second) if frame.second is not None else None
+        self._images = (_qimage(frame.pixels), second)
+        if extent_changed:
+            self._extent = tuple(frame.extent)
+            self.fit()
+        self.update()
+
+    def fit(self) -> None:
+        """Zoom so the whole image fits, centred."""
+        h, w = self._extent
+        if self.width() < 2 or self.height() < 2:
+            return
+        z = min(self.width() / w, self.height() / h)
+        self._set_zoom(z, QPointF((self.width() - w * z) / 2, (self.height() - h * z) / 2))
+        self._fitted = True
+
+    def zoom_to(self, zoom: float, anchor: QPointF | None = None) -> None:
+        """Set the zoom (screen px per camera px) keeping ``anchor`` (widget coords) fixed."""
+        zoom = float(min(max(zoom, self.MIN_ZOOM), self.MAX_ZOOM))
+        if anchor is None:
+            anchor = QPointF(self.width() / 2, self.height() / 2)
+        img = self.to_image(anchor)
+        self._set_zoom(zoom, QPointF(anchor.x() - img.x() * zoom, anchor.y() - img.y() * zoom))
+        self._fitted = False
+
+    def zoom_by(self, factor: float, anchor: QPointF | None = None) -> None:
+        self.zoom_to(self.zoom * factor, anchor)
+
+    def _set_zoom(self, zoom: float, offset: QPointF) -> None:
+        changed = zoom != self.zoom
+        self.zoom, self.offset = zoom, offset
+        self.update()
+        if changed:
+            self.zoom_changed.emit(zoom)
+
+    def to_image(self, p: QPointF) -> QPointF:
+        """Widget coordinates → camera-pixel coordinates (float)."""
+        return QPointF((p.x() - self.offset.x()) / self.zoom, (p.y() - self.offset.y()) / self.zoom)
+
+    def to_widget(self, p: QPointF) -> QPointF:
+        return QPointF(p.x() * self.zoom + self.offset.x(), p.y() * self.zoom + self.offset.y())
+
+    def image_rect(self) -> QRectF:
+        h, w = self._extent
+        return QRectF(self.offset.x(), self.offset.y(), w * self.zoom, h * self.zoom)
+
+    def _paints_camera_pixels(self) -> bool:
+        return self.frame is None or self.frame.view != View.COMPONENTS
+
+    # ------------------------------------------------------------------ overlays
+    def _target_word(self, colour, current: bool) -> np.uint32:
+        a = _CURRENT_ALPHA if current else _OVERLAY_ALPHA
+        r, g, b = (int(c * a / 255) for c in colour)
+        return np.uint32((a << 24) | (r << 16) | (g << 8) | b)
+
+    def _compose(self, y0: int, y1: int, x0: int, x1: int) -> None:
+        region = self._overlay[y0:y1, x0:x1]
+        region[...] = 0
+        for t in self.doc.targets:
+            region[t.mask[y0:y1, x0:x1]] = self._target_word(t.colour, t.uid == self.doc.current)
+        if self.doc.unreachable is not None:
+            unreach = self.doc.unreachable[y0:y1, x0:x1]
+            if unreach.any():
+                yy, xx = np.mgrid[y0:y1, x0:x1]
+                stripe = ((xx + yy) // 3) % 3 == 0
+                painted = region != 0
+                region[unreach & stripe & ~painted] = np.uint32(0x50505050)  # grey hatch
+                region[unreach & stripe & painted] = np.uint32(0xE0E00000)  # refused: red hatch
+
+    def _rebuild_overlay(self) -> None:
+        h, w = self.doc.shape
+        self._compose(0, h, 0, w)
+        self.update()
+
+    def _on_mask(self, uid: int, bbox) -> None:
+        self._compose(*bbox)
+        self.update()
+
+    # ------------------------------------------------------------------ painting
+    def paintEvent(self, event) -> None:  # noqa: N802 - Qt override
+        p = QPainter(self)
+        p.fillRect(self.rect(), _BACKGROUND)
+        rect = self.image_rect()
+        if self._images is not None:
+            first, second = self._images
+            frame_px = rect.width() / max(first.width(), 1)
+            p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, frame_px < 2.0)
+            if second is not None:
+                cut = rect.left() + rect.width() * self.split
+                p.save()
+                p.setClipRect(QRectF(rect.left(), rect.top(), cut - rect.left(), rect.height()))
+                p.drawImage(rect, first)
+                p.setClipRect(QRectF(cut, rect.top(), rect.right() - cut, rect.height()))
+                p.drawImage(rect, second)
+                p.restore()
+            else:
+                p.drawImage(rect, first)
+        if self.show_overlays and self._paints_camera_pixels():
+            p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, self.zoom < 1.0)
+            p.drawImage(rect, self._overlay_image)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing, True)
+        if self.frame is not None and self.frame.second is not None:
+            self._draw_divider(p, rect)
+        if self.frame is not None and self.frame.tiles:
+            self._draw_tiles(p, rect)
+        self._draw_tool(p)
+        if self.frame is not None and self.frame.scale is not None:
+            self._draw_scale(p)
+        p.end()
+        self.paint_count += 1
+        if self.frame is not None:
+            self.painted_request = self.frame.request_id
+
+    def _draw_divider(self, p: QPainter, rect: QRectF) -> None:
+        x = rect.left() + rect.width() * self.split
+        p.setPen(QPen(QColor(255, 255, 255, 220), 2))
+        p.drawLine(QPointF(x, rect.top()), QPointF(x, rect.bottom()))
+        cy = min(max(rect.center().y(), 20), self.height() - 20)
+        p.setBrush(QColor(255, 255, 255, 230))
+        p.drawEllipse(QPointF(x, cy), 9, 9)
+        p.setPen(QPen(QColor(40, 40, 40), 2))
+        p.drawLine(QPointF(x - 4, cy), QPointF(x - 1, cy - 3))
+        p.drawLine(QPointF(x - 4, cy), QPointF(x - 1, cy + 3))
+        p.drawLine(QPointF(x + 4, cy), QPointF(x + 1, cy - 3))
+        p.drawLine(QPointF(x + 4, cy), QPointF(x + 1, cy + 3))
+        font = QFont(self.font())
+        font.setPointSizeF(max(font.pointSizeF(), 9))
+        p.setFont(font)
+        for text, right in (("recolored", False), ("original", True)):
+            tw = p.fontMetrics().horizontalAdvance(text) + 12
+            box = QRectF(x + 14 if right else x - 14 - tw, rect.top() + 8, tw, 20)
+            p.setPen(Qt.PenStyle.NoPen)
+            p.setBrush(QColor(0, 0, 0, 150))
+            p.drawRoundedRect(box, 4, 4)
+            p.setPen(QColor(235, 235, 235))
+            p.drawText(box, Qt.AlignmentFlag.AlignCenter, text)
+
+    def _draw_tiles(self, p: QPainter, rect: QRectF) -> None:
+        fh, fw = self.frame.pixels.shape
+        sx, sy = rect.width() / fw, rect.height() / fh
+        p.setPen(QPen(QColor(20, 20, 20), 2))
+        p.setBrush(Qt.BrushStyle.NoBrush)
+        for t in self.frame.tiles:
+            box = QRectF(rect.left() + t.x * sx, rect.top() + t.y * sy, t.w * sx, t.h * sy)
+            p.drawRect(box)
+            label = QRectF(box.left() + 6, box.top() + 6, p.fontMetrics().horizontalAdvance(t.label) + 12, 20)
+            p.save()
+            p.setPen(Qt.PenStyle.NoPen)
+            p.setBrush(QColor(0, 0, 0, 160))
+            p.drawRoundedRect(label, 4, 4)
+            p.setPen(QColor(240, 240, 240))
+            p.drawText(label, Qt.AlignmentFlag.AlignCenter, t.label)
+            p.restore()
+
+    def _draw_tool(self, p: QPainter) -> None:
+        if not self._paints_camera_pixels():
+            return
+        pts = self.painter.polygon
+        if pts:
+            poly = QPolygonF([self.to_widget(QPointF(x, y)) for x, y in pts])
+            if self._mouse is not None and self.painter.tool == Tool.POLYGON:
+                poly.append(self._mouse)
+            for colour, width in ((QColor(0, 0, 0, 200), 3), (QColor(255, 255, 255), 1)):
+                p.setPen(QPen(colour, width, Qt.PenStyle.SolidLine))
+                p.drawPolyline(poly)
+            p.setBrush(QColor(255, 255, 255))
+            for pt in poly:
+                p.drawEllipse(pt, 2.5, 2.5)
+        if self._mouse is not None and self.painter.tool in (Tool.BRUSH, Tool.ERASER) and self._pan_from is None:
+            r = self.painter.size * self.zoom / 2
+            p.setBrush(Qt.BrushStyle.NoBrush)
+            for colour, width in ((QColor(0, 0, 0, 180), 3), (QColor(255, 255, 255), 1)):
+                p.setPen(QPen(colour, width, Qt.PenStyle.DashLine if self.painter.tool == Tool.ERASER else Qt.PenStyle.SolidLine))
+                p.drawEllipse(self._mouse, r, r)
+
+    def _draw_scale(self, p: QPainter) -> None:
+        s = self.frame.scale
+        w, h = 240, 12
+        x, y = self.width() - w - 24, self.height() - 58
+        p.setPen(Qt.PenStyle.NoPen)
+        p.setBrush(QColor(0, 0, 0, 170))
+        p.drawRoundedRect(QRectF(x - 12, y - 24, w + 24, 64), 6, 6)
+        grad = QLinearGradient(x, 0, x + w, 0)
+        for i in range(0, 256, 15):
+            r, g, b = (int(v) for v in s.cmap[i])
+            grad.setColorAt(i / 255, QColor(r, g, b))
+        r, g, b = (int(v) for v in s.cmap[255])
+        grad.setColorAt(1.0, QColor(r, g, b))
+        p.setBrush(QBrush(grad))
+        p.drawRect(QRectF(x, y, w, h))
+        p.setPen(QColor(230, 230, 230))
+        font = QFont(self.font())
+        font.setPointSizeF(max(font.pointSizeF() - 1, 7))
+        p.setFont(font)
+        p.drawText(QRectF(x, y - 20, w, 16), Qt.AlignmentFlag.AlignLeft, s.label)
+        lo, hi = f"{s.lo:.3g}", f"{s.hi:.3g}"
+        p.drawText(QRectF(x, y + h + 2, w, 16), Qt.AlignmentFlag.AlignLeft, lo)
+        p.drawText(QRectF(x, y + h + 2, w, 16), Qt.AlignmentFlag.AlignRight, hi)
+        if s.lo < 0 < s.hi:
+            p.drawText(QRectF(x, y + h + 2, w, 16), Qt.AlignmentFlag.AlignHCenter, "0")
+
+    # ------------------------------------------------------------------ input
+    def _plain(self, kind: EventType, e: QMouseEvent) -> MouseEvent:
+        img = self.to_image(e.position())
+        buttons = set()
+        if e.buttons() & Qt.MouseButton.LeftButton or e.button() == Qt.MouseButton.LeftButton:
+            buttons.add("left")
+        if e.buttons() & Qt.MouseButton.RightButton or e.button() == Qt.MouseButton.RightButton:
+            buttons.add("right")
+        subtract = bool(e.modifiers() & Qt.KeyboardModifier.AltModifier) or "right" in buttons
+        return MouseEvent(kind, img.x(), img.y(), frozenset(buttons), subtract)
+
+    def _near_divider(self, pos: QPointF) -> bool:
+        if self.frame is None or self.frame.second is None:
+            return False
+        rect = self.image_rect()
+        return abs(pos.x() - (rect.left() + rect.width() * self.split)) <= 8
+
+    def mousePressEvent(self, e: QMouseEvent) -> None:  # noqa: N802
+        self.setFocus()
+        if e.button() == Qt.MouseButton.MiddleButton or (e.button() == Qt.MouseButton.LeftButton and self._space):
+            self._pan_from = (e.position(), QPointF(self.offset))
+            self.setCursor(Qt.CursorShape.ClosedHandCursor)
+            return
+        if e.button() == Qt.MouseButton.LeftButton and self._near_divider(e.position()):
+            self._dragging_split = True
+            return
+        if e.button() in (Qt.MouseButton.LeftButton, Qt.MouseButton.RightButton) and self._paints_camera_pixels():
+            self._painting = self.painter.handle(self._plain(EventType.PRESS, e))
+            self.update()
+
+    def mouseDoubleClickEvent(self, e: QMouseEvent) -> None:  # noqa: N802
+        if self.painter.tool == Tool.POLYGON and self._paints_camera_pixels():
+            self.painter.handle(self._plain(EventType.DOUBLE_CLICK, e))
+            self.update()
+        else:
+            self.mousePressEvent(e)
+
+    def mouseMoveEvent(self, e: QMouseEvent) -> None:  # noqa: N802
+        pos = e.position()
+        self._mouse = pos
+        if self._pan_from is not None:
+            start, offset = self._pan_from
+            self.offset = QPointF(offset.x() + pos.x() - start.x(), offset.y() + pos.y() - start.y())
+            self._fitted = False
+            self.update()
+            return
+        if self._dragging_split:
+            rect = self.image_rect()
+            self.split = float(min(max((pos.x() - rect.left()) / max(rect.width(), 1.0), 0.0), 1.0))
+            self.update()
+            return
+        self.setCursor(Qt.CursorShape.SplitHCursor if self._near_divider(pos) else
+                       Qt.CursorShape.OpenHandCursor if self._space else Qt.CursorShape.CrossCursor)
+        if self._painting or self.painter.polygon:
+            self.painter.handle(self._plain(EventType.MOVE, e))
+        img = self.to_image(pos)
+        ix, iy = int(np.floor(img.x())), int(np.floor(img.y()))
+        h, w = self.doc.shape
+        inside = self._paints_camera_pixels() and 0 <= ix < w and 0 <= iy < h
+        self.cursor_moved.emit((ix, iy) if inside else None)
+        self.update()
+
+    def mouseReleaseEvent(self, e: QMouseEvent) -> None:  # noqa: N802
+        if self._pan_from is not None and e.button() in (Qt.MouseButton.MiddleButton, Qt.MouseButton.LeftButton):
+            self._pan_from = None
+            self.setCursor(Qt.CursorShape.OpenHandCursor if self._space else Qt.CursorShape.CrossCursor)
+            return
+        if self._dragging_split:
+            self._dragging_split = False
+            return
+        if self._painting:
+            self._painting = False
+            self.painter.handle(self._plain(EventType.RELEASE, e))
+            self.update()
+
+    def leaveEvent(self, e) -> None:  # noqa: N802
+        self._mouse = None
+        self.cursor_moved.emit(None)
+        self.update()
+
+    def wheelEvent(self, e) -> None:  # noqa: N802
+        steps = e.angleDelta().y() / 120.0
+        if steps:
+            self.zoom_by(1.25**steps, e.position())
+
+    def keyPressEvent(self, e) -> None:  # noqa: N802
+        if e.key() == Qt.Key.Key_Space and not e.isAutoRepeat():
+            self._space = True
+            self.setCursor(Qt.CursorShape.OpenHandCursor)
+            return
+        if e.key() in (Qt.Key.Key_Return, Qt.Key.Key_Enter) and self.painter.polygon:
+            self.painter.close_polygon(subtract=bool(e.modifiers() & Qt.KeyboardModifier.AltModifier))
+            self.update()
+            return
+        if e.key() == Qt.Key.Key_Escape and self.painter.polygon:
+            self.painter.cancel()
+            self.update()
+            return
+        super().keyPressEvent(e)
+
+    def keyReleaseEvent(self, e) -> None:  # noqa: N802
+        if e.key() == Qt.Key.Key_Space and not e.isAutoRepeat():
+            self._space = False
+            self.setCursor(Qt.CursorShape.CrossCursor)
+            return
+        super().keyReleaseEvent(e)
+
+    def resizeEvent(self, e) -> None:  # noqa: N802
+        if self._fitted:
+            self.fit()
+        super().resizeEvent(e)

@@ -1,0 +1,751 @@
+"""The main window: menus, toolbars, canvas, side panels, status bar, files and jobs.
+
+It owns one document at a time (with its undo stack, painter, preview controller and
+canvas) and runs every long piece of work — opening the demo rig, saving, exporting — as a
+:class:`~app.worker.Job` with progress, pause and cancel in the status bar. Errors are shown
+as dialogs with the engine's message; nothing the user did is dropped when something fails.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import QSettings, QSignalBlocker, Qt, QTimer
+from PySide6.QtGui import QAction, QActionGroup, QGuiApplication, QKeySequence, QUndoGroup, QUndoStack
+from PySide6.QtWidgets import (
+    QDockWidget,
+    QDoubleSpinBox,
+    QFileDialog,
+    QHBoxLayout,
+    QLabel,
+    QMainWindow,
+    QMessageBox,
+    QProgressBar,
+    QSpinBox,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app import files
+from app.canvas import Canvas
+from app.model import Document
+from app.painting import Painter, Tool
+from app.panels import AlbedoPanel, TargetPanel
+from app.preview import PreviewController
+from app.qt_history import QtHistory
+from app.render import NEEDS_TRUTH, View, component_grid
+from app.worker import Job
+from engine.errors import InputError
+
+APP_NAME = "Albedit"
+MAX_RECENT = 8
+
+_VIEW_LABELS = {
+    View.RECOLORED: "&Recolored",
+    View.ORIGINAL: "&Original",
+    View.SPLIT: "&Split Before/After",
+    View.DIFFERENCE: "&Difference",
+    View.COMPONENTS: "Interaction &Components",
+    View.TRUTH: "&Ground Truth",
+    View.ERROR: "&Error vs Ground Truth",
+}
+_TOOL_KEYS = {Tool.BRUSH: "B", Tool.ERASER: "E", Tool.POLYGON: "P", Tool.LASSO: "L", Tool.FILL: "F"}
+_EXPORT_FILTERS = {
+    "OpenEXR, half float (*.exr)": (".exr", "half"),
+    "OpenEXR, float (*.exr)": (".exr", "float"),
+    "TIFF, 16-bit linear (*.tif *.tiff)": (".tif", "uint16"),
+    "TIFF, float (*.tif *.tiff)": (".tif", "float"),
+    "PNG, 8-bit sRGB for sharing (*.png)": (".png", "uint8"),
+}
+
+
+class JobProgress(QWidget):
+    """Status-bar progress of the running job: message, bar, pause and cancel."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.label = QLabel()
+        self.bar = QProgressBar()
+        self.bar.setMaximumWidth(220)
+        self.bar.setTextVisible(True)
+        self.pause = QToolButton(text="Pause", checkable=True)
+        self.cancel = QToolButton(text="Cancel")
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        for w in (self.label, self.bar, self.pause, self.cancel):
+            lay.addWidget(w)
+        self.job: Job | None = None
+        self.hide()
+
+    def attach(self, job: Job) -> None:
+        self.job = job
+        self.label.setText(job.name)
+        self.bar.setRange(0, 0)
+        self.pause.setChecked(False)
+        job.progress.connect(self._on_progress)
+        job.paused.connect(self.pause.setChecked)
+        job.ended.connect(self._on_ended)
+        self.pause.toggled.connect(self._on_pause)
+        self.cancel.clicked.connect(job.cancel)
+        self.show()
+
+    def _on_progress(self, step: int, total: int, message: str) -> None:
+        if total > 0:
+            self.bar.setRange(0, total)
+            self.bar.setValue(step)
+        self.label.setText(f"{self.job.name}: {message}" if self.job else message)
+
+    def _on_pause(self, on: bool) -> None:
+        if self.job is not None:
+            self.job.pause() if on else self.job.resume()
+
+    def _on_ended(self) -> None:
+        self.pause.toggled.disconnect(self._on_pause)
+        if self.job is not None:
+            self.cancel.clicked.disconnect(self.job.cancel)
+        self.job = None
+        self.hide()
+
+
+class MainWindow(QMainWindow):
+    """Albedit's main window.
+
+    Parameters
+    ----------
+    document : Document, optional
+        Show this document (else an empty window until :meth:`open_path` / :meth:`open_demo`).
+    session : engine.session.Session, optional
+        Where ``document`` is saved.
+    synchronous : bool
+        Preview and jobs run on the calling thread (tests).
+    settings : QSettings, optional
+        Recent files; tests pass a temporary one.
+    """
+
+    def __init__(self, document: Document | None = None, session=None, *, synchronous: bool = False,
+                 settings: QSettings | None = None, rig=None):
+        super().__init__()
+        self.synchronous = synchronous
+        self.settings = settings if settings is not None else QSettings(APP_NAME, APP_NAME)
+        self.doc: Document | None = None
+        self.session = session
+        self.rig = rig
+        self.job: Job | None = None
+        self.undo_group = QUndoGroup(self)
+        self.preview: PreviewController | None = None
+        self.canvas: Canvas | None = None
+        self.painter: Painter | None = None
+        self._placeholder = QLabel("Open a session or an image (File menu), or start the virtual-rig demo.")
+        self._placeholder.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.setCentralWidget(self._placeholder)
+        self.resize(1500, 920)
+        self._build_actions()
+        self._build_menus()
+        self._build_toolbars()
+        self._build_docks()
+        self._build_status()
+        if document is not None:
+            self.set_document(document, session)
+        self._update_title()
+        self._update_actions()
+
+    # ================================================================== construction
+    def _action(self, text: str, slot=None, shortcut=None, *, checkable=False, tip: str = "") -> QAction:
+        a = QAction(text, self)
+        if shortcut is not None:
+            a.setShortcuts(shortcut if isinstance(shortcut, list) else [QKeySequence(shortcut)])
+        a.setCheckable(checkable)
+        if tip:
+            a.setStatusTip(tip)
+            a.setToolTip(tip)
+        if slot is not None:
+            a.triggered.connect(slot)
+        self.addAction(a)
+        return a
+
+    def _build_actions(self) -> None:
+        K = QKeySequence.StandardKey
+        self.act_open = self._action("&Open Session…", self._on_open_session, K.Open)
+        self.act_open_image = self._action("Open &Image…", self._on_open_image, "Ctrl+Shift+O")
+        self.act_demo = self._action("Virtual Rig &Demo", lambda: self.open_demo(), tip="Open the virtual Cornell box")
+        self.act_save = self._action("&Save", self.save, K.Save)
+        self.act_save_as = self._action("Save &As…", self.save_as, K.SaveAs)
+        self.act_export = self._action("&Export Recolored Image…", self._on_export, "Ctrl+E")
+        self.act_quit = self._action("&Quit", self.close, K.Quit)
+        self.act_undo = self.undo_group.createUndoAction(self, "&Undo")
+        self.act_undo.setShortcuts(QKeySequence.keyBindings(K.Undo))
+        self.act_redo = self.undo_group.createRedoAction(self, "&Redo")
+        self.act_redo.setShortcuts(QKeySequence.keyBindings(K.Redo) + [QKeySequence("Ctrl+Shift+Z")])
+        for a in (self.act_undo, self.act_redo):
+            self.addAction(a)
+        self.act_add = self._action("&Add Target", lambda: self._guard(self.doc.add_target), "Ctrl+T")
+        self.act_delete = self._action("&Delete Target", self._on_delete_target)
+        self.act_clear = self._action("&Clear Mask", lambda: self._mask_op("clear_mask"), "Ctrl+Backspace")
+        self.act_invert = self._action("&Invert Mask", lambda: self._mask_op("invert_mask"), "Ctrl+I")
+        self.act_overlays = self._action("Show &Overlays", self._on_overlays, "O", checkable=True)
+        self.act_overlays.setChecked(True)
+        self.act_bigger = self._action("Larger Brush", lambda: self._brush("grow"), "]")
+        self.act_smaller = self._action("Smaller Brush", lambda: self._brush("shrink"), "[")
+        self.tool_group = QActionGroup(self)
+        self.tool_actions: dict[Tool, QAction] = {}
+        for tool, key in _TOOL_KEYS.items():
+            a = self._action(tool.value.capitalize(), lambda _c=False, t=tool: self.set_tool(t), key, checkable=True)
+            self.tool_group.addAction(a)
+            self.tool_actions[tool] = a
+        self.tool_actions[Tool.BRUSH].setChecked(True)
+        self.tool_actions[Tool.POLYGON].setToolTip("Polygon: click vertices; double-click, Enter or the first vertex closes it")
+        self.tool_actions[Tool.FILL].setToolTip("Fill by similar colour (tolerance in the toolbar); Alt subtracts")
+        self.view_group = QActionGroup(self)
+        self.view_actions: dict[View, QAction] = {}
+        for i, (view, label) in enumerate(_VIEW_LABELS.items()):
+            a = self._action(label, lambda _c=False, v=view: self.set_view(v), str(i + 1), checkable=True)
+            self.view_group.addAction(a)
+            self.view_actions[view] = a
+        self.view_actions[View.RECOLORED].setChecked(True)
+        self.act_fit = self._action("&Fit", lambda: self.canvas and self.canvas.fit(), "Ctrl+0")
+        self.act_100 = self._action("&100 %", lambda: self.canvas and self.canvas.zoom_to(1.0), "Ctrl+1")
+        self.act_zoom_in = self._action("Zoom &In", lambda: self.canvas and self.canvas.zoom_by(1.25), K.ZoomIn)
+        self.act_zoom_out = self._action("Zoom &Out", lambda: self.canvas and self.canvas.zoom_by(0.8), K.ZoomOut)
+        self.act_acquire = self._action("&Acquire…", self.acquire, tip="Measure the targets on the rig (cascade)")
+        self.act_discard = self._action("&Discard Acquisition", self._on_discard)
+        self.act_about = self._action("&About Albedit", self._on_about)
+
+    def _build_menus(self) -> None:
+        mb = self.menuBar()
+        m = mb.addMenu("&File")
+        for a in (self.act_open, self.act_open_image, self.act_demo):
+            m.addAction(a)
+        self.recent_menu = m.addMenu("Open &Recent")
+        self.recent_menu.aboutToShow.connect(self._fill_recent)
+        m.addSeparator()
+        for a in (self.act_save, self.act_save_as, self.act_export):
+            m.addAction(a)
+        m.addSeparator()
+        m.addAction(self.act_quit)
+        m = mb.addMenu("&Edit")
+        m.addAction(self.act_undo)
+        m.addAction(self.act_redo)
+        m = mb.addMenu("&Targets")
+        for a in (self.act_add, self.act_delete):
+            m.addAction(a)
+        m.addSeparator()
+        for a in self.tool_actions.values():
+            m.addAction(a)
+        m.addSeparator()
+        for a in (self.act_bigger, self.act_smaller, self.act_clear, self.act_invert, self.act_overlays):
+            m.addAction(a)
+        m = mb.addMenu("&View")
+        for a in self.view_actions.values():
+            m.addAction(a)
+        m.addSeparator()
+        for a in (self.act_fit, self.act_100, self.act_zoom_in, self.act_zoom_out):
+            m.addAction(a)
+        m = mb.addMenu("&Rig")
+        m.addAction(self.act_acquire)
+        m.addAction(self.act_discard)
+        m = mb.addMenu("&Help")
+        m.addAction(self.act_about)
+
+    def _build_toolbars(self) -> None:
+        tb = self.addToolBar("Tools")
+        tb.setObjectName("tools")
+        for a in self.tool_actions.values():
+            tb.addAction(a)
+        tb.addSeparator()
+        tb.addWidget(QLabel(" Size "))
+        self.size_spin = QSpinBox()
+        self.size_spin.setRange(int(Painter.MIN_SIZE), int(Painter.MAX_SIZE))
+        self.size_spin.setSuffix(" px")
+        self.size_spin.setToolTip("Brush diameter in camera pixels ([ and ] change it)")
+        self.size_spin.valueChanged.connect(lambda v: self.painter and self.painter.set_size(v))
+        tb.addWidget(self.size_spin)
+        tb.addWidget(QLabel(" Tolerance "))
+        self.tol_spin = QDoubleSpinBox()
+        self.tol_spin.setRange(0.005, 2.0)
+        self.tol_spin.setSingleStep(0.01)
+        self.tol_spin.setDecimals(3)
+        self.tol_spin.setValue(0.1)
+        self.tol_spin.setToolTip("Fill tolerance: largest |log colour difference| to the clicked pixel (0.1 ≈ ±10 %)")
+        self.tol_spin.valueChanged.connect(lambda v: self.painter and setattr(self.painter, "tolerance", float(v)))
+        tb.addWidget(self.tol_spin)
+        tb.addSeparator()
+        tb.addAction(self.act_clear)
+        tb.addAction(self.act_invert)
+        tb = self.addToolBar("View")
+        tb.setObjectName("view")
+        for v in (View.RECOLORED, View.ORIGINAL, View.SPLIT, View.DIFFERENCE, View.COMPONENTS, View.TRUTH, View.ERROR):
+            tb.addAction(self.view_actions[v])
+        tb.addSeparator()
+        tb.addWidget(QLabel(" Exposure "))
+        self.exposure_spin = QDoubleSpinBox()
+        self.exposure_spin.setRange(-12.0, 12.0)
+        self.exposure_spin.setSingleStep(0.25)
+        self.exposure_spin.setSuffix(" EV")
+        self.exposure_spin.setToolTip("Display exposure in stops (does not change the data)")
+        self.exposure_spin.valueChanged.connect(lambda v: self.preview and self.preview.set_exposure(v))
+        tb.addWidget(self.exposure_spin)
+        tb.addAction(self.act_fit)
+        tb.addAction(self.act_100)
+
+    def _build_docks(self) -> None:
+        self.targets_dock = QDockWidget("Targets (cascade order)", self)
+        self.targets_dock.setObjectName("targets")
+        self.albedo_dock = QDockWidget("Albedo", self)
+        self.albedo_dock.setObjectName("albedo")
+        for d in (self.targets_dock, self.albedo_dock):
+            d.setFeatures(QDockWidget.DockWidgetFeature.DockWidgetMovable | QDockWidget.DockWidgetFeature.DockWidgetFloatable)
+            self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, d)
+        self.target_panel: TargetPanel | None = None
+        self.albedo_panel: AlbedoPanel | None = None
+
+    def _build_status(self) -> None:
+        sb = self.statusBar()
+        self.readout = QLabel()
+        self.readout.setMinimumWidth(420)
+        self.readout.setStyleSheet("font-family: monospace;")
+        self.note = QLabel()
+        self.zoom_label = QLabel()
+        self.progress = JobProgress()
+        sb.addWidget(self.readout)
+        sb.addWidget(self.note, 1)
+        sb.addPermanentWidget(self.progress)
+        sb.addPermanentWidget(self.zoom_label)
+
+    # ================================================================== document
+    def set_document(self, document: Document, session=None, *, rig=None) -> None:
+        """Show ``document`` (replacing the current one, whose rig is closed)."""
+        self._teardown()
+        self.doc, self.session = document, session
+        if rig is not None:
+            self.rig = rig
+        stack = QUndoStack(self)
+        document.use_history(QtHistory(stack))
+        self.undo_group.addStack(stack)
+        self.undo_group.setActiveStack(stack)
+        self.painter = Painter(document)
+        self.painter.set_size(self.size_spin.value() if self.size_spin.value() > 1 else 20)
+        self.painter.tolerance = self.tol_spin.value()
+        self.painter.set_tool(self._checked_tool())
+        with QSignalBlocker(self.size_spin):
+            self.size_spin.setValue(int(self.painter.size))
+        self.canvas = Canvas(document, self.painter)
+        self.setCentralWidget(self.canvas)
+        self.preview = PreviewController(document, max_shape=self._screen_shape(), synchronous=self.synchronous, parent=self)
+        self.preview.exposure = self.exposure_spin.value()
+        self.preview.view = self._checked_view()
+        self.preview.frame_ready.connect(self._on_frame)
+        self.preview.failed.connect(lambda msg: self.statusBar().showMessage(msg, 8000))
+        self.canvas.cursor_moved.connect(self._on_cursor)
+        self.canvas.zoom_changed.connect(lambda z: self.zoom_label.setText(f"{100 * z:.0f} %"))
+        self.target_panel = TargetPanel(document)
+        self.target_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
+        self.albedo_panel = AlbedoPanel(document)
+        self.targets_dock.setWidget(self.target_panel)
+        self.albedo_dock.setWidget(self._padded(self.albedo_panel))
+        ev = document.events
+        ev.dirty.connect(lambda _d: self._update_title())
+        ev.warning.connect(lambda m: self.statusBar().showMessage(m, 8000))
+        ev.acquisition.connect(self._update_actions)
+        ev.current.connect(lambda _u: self._update_actions())
+        ev.targets.connect(self._update_actions)
+        self._update_grid()
+        self.preview.request()
+        self._update_title()
+        self._update_actions()
+        QTimer.singleShot(0, self.canvas.fit)
+
+    def _teardown(self) -> None:
+        if self.preview is not None:
+            self.preview.close()
+            self.preview.deleteLater()
+        for stack in self.undo_group.stacks():
+            self.undo_group.removeStack(stack)
+            stack.deleteLater()
+        self.preview = self.canvas = self.painter = None
+        if self.rig is not None:
+            try:
+                self.rig.close()
+            finally:
+                self.rig = None
+
+    @staticmethod
+    def _padded(w: QWidget) -> QWidget:
+        box = QWidget()
+        lay = QVBoxLayout(box)
+        lay.addWidget(w)
+        lay.addStretch(1)
+        return box
+
+    def _screen_shape(self) -> tuple[int, int]:
+        screen = QGuiApplication.primaryScreen()
+        if screen is None:
+            return (1080, 1920)
+        size, dpr = screen.size(), screen.devicePixelRatio()
+        return (max(int(size.height() * dpr), 256), max(int(size.width() * dpr), 256))
+
+    # ================================================================== state → UI
+    def _update_title(self) -> None:
+        name = "(no document)"
+        if self.session is not None:
+            name = Path(self.session.path).name
+        elif self.doc is not None:
+            name = Path(self.doc.source).name if self.doc.source and ":" not in self.doc.source else self.doc.source or "untitled"
+        self.setWindowTitle(f"{name}[*] — {APP_NAME}")
+        self.setWindowModified(self.doc is not None and self.doc.is_dirty())
+
+    def _update_actions(self, *_args) -> None:
+        has = self.doc is not None
+        idle = self.job is None
+        cur = has and self.doc.current != -1
+        for a in (self.act_save, self.act_save_as, self.act_add, self.act_overlays, self.act_fit, self.act_100,
+                  self.act_zoom_in, self.act_zoom_out):
+            a.setEnabled(has and idle)
+        for a in (self.act_clear, self.act_invert):
+            a.setEnabled(cur and idle and not self.doc.mask_lock(self.doc.current))
+        self.act_delete.setEnabled(cur and idle and not self.doc.mask_lock(self.doc.current))
+        self.act_export.setEnabled(has and idle and self.doc.decomposition is not None)
+        self.act_export.setToolTip("" if has and self.doc.decomposition is not None else "Acquire first: export needs a decomposition")
+        self.act_acquire.setEnabled(has and idle and self.rig is not None)
+        self.act_discard.setEnabled(has and idle and self.doc.acquisition is not None)
+        for a in (self.act_open, self.act_open_image, self.act_demo):
+            a.setEnabled(idle)
+        for view, a in self.view_actions.items():
+            a.setEnabled(has and self.preview is not None and self.preview.available(view))
+        if has and self.preview is not None and not self.preview.available(self.preview.view):
+            self.set_view(View.RECOLORED)
+
+    def _on_frame(self, frame) -> None:
+        if self.canvas is None:
+            return
+        self.canvas.set_frame(frame)
+        self.note.setText(frame.note)
+
+    def _on_cursor(self, pos) -> None:
+        if pos is None or self.preview is None:
+            self.readout.setText("")
+            return
+        x, y = pos
+        value = self.preview.readout(x, y)
+        text = f"x {x:5d}  y {y:5d}"
+        if value is not None:
+            label, rgb = value
+            text += f"   {label}: R {rgb[0]:.4g}  G {rgb[1]:.4g}  B {rgb[2]:.4g}"
+        names = [t.name for t in self.doc.targets if t.mask[y, x]]
+        if names:
+            text += f"   [{', '.join(names)}]"
+        self.readout.setText(text)
+
+    # ================================================================== user actions
+    def set_tool(self, tool: Tool | str) -> None:
+        tool = Tool(tool)
+        with QSignalBlocker(self.tool_group):
+            self.tool_actions[tool].setChecked(True)
+        if self.painter is not None:
+            self.painter.set_tool(tool)
+            self.canvas.update()
+
+    def set_view(self, view: View | str) -> None:
+        view = View(view)
+        self.view_actions[view].setChecked(True)
+        if self.preview is not None:
+            self._update_grid(view)
+            self.preview.set_view(view)
+
+    def _update_grid(self, view: View | None = None) -> None:
+        if self.preview is None or self.doc.decomposition is None:
+            return
+        size = self.canvas.size() if self.canvas is not None else self.size()
+        self.preview.set_grid(component_grid(self.doc.decomposition.order, self.doc.shape, (size.height(), size.width())))
+
+    def _checked_tool(self) -> Tool:
+        return next((t for t, a in self.tool_actions.items() if a.isChecked()), Tool.BRUSH)
+
+    def _checked_view(self) -> View:
+        return next((v for v, a in self.view_actions.items() if a.isChecked()), View.RECOLORED)
+
+    def _brush(self, how: str) -> None:
+        if self.painter is None:
+            return
+        getattr(self.painter, how)()
+        with QSignalBlocker(self.size_spin):
+            self.size_spin.setValue(int(round(self.painter.size)))
+        self.canvas.update()
+
+    def _mask_op(self, name: str) -> None:
+        if self.doc is not None and self.doc.current != -1:
+            self._guard(getattr(self.doc, name), self.doc.current)
+
+    def _on_delete_target(self) -> None:
+        if self.doc is not None and self.doc.current != -1:
+            self._guard(self.doc.remove_target, self.doc.current)
+
+    def _on_overlays(self, on: bool) -> None:
+        if self.canvas is not None:
+            self.canvas.show_overlays = on
+            self.canvas.update()
+
+    def _on_discard(self) -> None:
+        if self.doc is None or self.doc.acquisition is None:
+            return
+        answer = QMessageBox.question(
+            self, "Discard acquisition",
+            "Forget the measured decomposition? Every κ and mask becomes editable again; "
+            "recoloring needs a new acquisition.")
+        if answer == QMessageBox.StandardButton.Yes:
+            self.doc.discard_acquisition()
+            self.preview.rebuild()
+
+    def acquire(self) -> None:
+        """Check the targets can be acquired, then measure them on the rig (cascade order)."""
+        if self.doc is None:
+            return
+        try:
+            self.doc.check_acquirable()
+        except InputError as exc:
+            self.show_error("Cannot acquire", exc)
+            return
+        try:
+            import engine.acquire  # noqa: F401 - written by the lead; wired in the acquisition task
+        except ImportError:
+            self.show_error("Cannot acquire", InputError("acquisition (engine.acquire) is not available in this build"))
+            return
+        self.show_error("Cannot acquire", InputError("the acquisition panel is not wired to engine.acquire yet"))
+
+    def _guard(self, fn, *args):
+        try:
+            return fn(*args)
+        except InputError as exc:
+            self.statusBar().showMessage(str(exc), 8000)
+            return None
+
+    def show_error(self, title: str, exc: BaseException) -> None:
+        """An error dialog with the engine's message."""
+        QMessageBox.critical(self, title, str(exc) or type(exc).__name__)
+
+    def _on_about(self) -> None:
+        QMessageBox.about(self, f"About {APP_NAME}",
+                          "<b>Albedit</b> — measurement-based editing of diffuse albedo with consistent "
+                          "interreflections.<br>Paint targets, acquire them on a camera–projector rig, then "
+                          "change their albedo with every interreflection following.")
+
+    # ================================================================== jobs
+    def run_job(self, fn, *args, name: str, on_done=None, on_failed=None, **kwargs) -> Job:
+        """Run ``fn(*args, progress=, should_stop=, **kwargs)`` as the window's job."""
+        if self.job is not None:
+            raise InputError(f"{self.job.name} is still running")
+        job = Job(fn, *args, name=name, synchronous=self.synchronous, parent=self, **kwargs)
+        self.job = job
+
+        def finished(result):
+            if on_done is not None:
+                on_done(result)
+
+        def failed(exc):
+            if on_failed is not None:
+                on_failed(exc)
+            else:
+                self.show_error(f"{name} failed", exc)
+
+        def ended():
+            self.job = None
+            self._set_busy(False)
+            self._update_actions()
+
+        job.finished.connect(finished)
+        job.failed.connect(failed)
+        job.cancelled.connect(lambda exc: self.statusBar().showMessage(str(exc), 8000))
+        job.ended.connect(ended)
+        self.progress.attach(job)
+        self._set_busy(True)
+        self._update_actions()
+        job.start()
+        return job
+
+    def _set_busy(self, busy: bool) -> None:
+        """While a job runs the document is read by it: no edits, no undo."""
+        for w in (self.canvas, self.target_panel, self.albedo_panel):
+            if w is not None:
+                w.setEnabled(not busy)
+        stacks = self.undo_group.stacks()
+        self.undo_group.setActiveStack(None if busy or not stacks else stacks[-1])
+
+    # ================================================================== files
+    def open_demo(self, rig_name: str = "virtual:cornell") -> None:
+        """Open the virtual rig with its scene targets painted (on a worker, with progress)."""
+        if not self.maybe_save():
+            return
+        from app.demo import open_demo
+
+        self.run_job(open_demo, rig_name, name=f"Opening {rig_name}",
+                     on_done=lambda res: self.set_document(res[0], None, rig=res[1]))
+
+    def open_path(self, path) -> bool:
+        """Open a session folder or an image; errors are shown, nothing else changes."""
+        if not self.maybe_save():
+            return False
+        try:
+            doc, session, warnings = files.open_document(path)
+        except (InputError, OSError, Exception) as exc:  # noqa: BLE001 - any failure is shown, state unchanged
+            self.show_error("Cannot open", exc)
+            return False
+        self._teardown()
+        self.rig = None
+        self.set_document(doc, session)
+        self._add_recent(path)
+        if warnings:
+            QMessageBox.warning(self, "Opened with warnings", "\n".join(warnings))
+        return True
+
+    def _on_open_session(self) -> None:
+        path = QFileDialog.getExistingDirectory(self, "Open session folder", self._last_dir())
+        if path:
+            self.open_path(path)
+
+    def _on_open_image(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(
+            self, "Open image", self._last_dir(),
+            "Images (*.exr *.tif *.tiff *.png *.jpg *.jpeg *.nef *.cr2 *.cr3 *.arw *.dng *.raf *.orf *.rw2)")
+        if path:
+            self.open_path(path)
+
+    def save(self) -> bool:
+        """Save into the current session (Save As when there is none). True when saved."""
+        if self.doc is None:
+            return False
+        if self.session is None:
+            return self.save_as()
+        return self._save_into(self.session, None)
+
+    def save_as(self, path=None) -> bool:
+        """Create a new session folder holding the photograph and the edit."""
+        if self.doc is None:
+            return False
+        if path is None:
+            path, _ = QFileDialog.getSaveFileName(self, "Save session as (a new folder)", self._last_dir(),
+                                                  "Albedit session folder (*)")
+            if not path:
+                return False
+        return self._save_into(None, Path(path))
+
+    def _save_into(self, session, new_path: Path | None) -> bool:
+        doc = self.doc
+        projector = None
+        if self.rig is not None:
+            projector = tuple(self.rig.projector.resolution)
+
+        def work(progress=None, should_stop=None):
+            if new_path is not None:
+                return files.create_session(new_path, doc, projector_resolution=projector, mark_saved=False)
+            files.save_document(doc, session, mark_saved=False)
+            return session
+
+        outcome = {}
+
+        def done(s):
+            self.session = s
+            doc.mark_saved()
+            outcome["ok"] = True
+            if new_path is not None:
+                self._add_recent(new_path)
+            self._update_title()
+            self.statusBar().showMessage(f"Saved {s.path}", 5000)
+
+        self.run_job(work, name="Saving", on_done=done)
+        return bool(outcome.get("ok")) if self.synchronous else True
+
+    def _on_export(self) -> None:
+        if self.doc is None:
+            return
+        path, chosen = QFileDialog.getSaveFileName(self, "Export recolored image", self._last_dir(),
+                                                   ";;".join(_EXPORT_FILTERS))
+        if not path:
+            return
+        ext, dtype = _EXPORT_FILTERS.get(chosen, (Path(path).suffix.lower(), None))
+        if Path(path).suffix.lower() not in files.EXPORT_FORMATS:
+            path = path + ext
+        self.export(path, dtype=dtype)
+
+    def export(self, path, *, dtype: str | None = None, clip: bool = False) -> None:
+        """Export the full-resolution recolored image on a worker (see :func:`app.files.export_image`)."""
+        exposure = self.exposure_spin.value()
+
+        def failed(exc):
+            if isinstance(exc, InputError) and "allow clipping" in str(exc) and not clip:
+                answer = QMessageBox.question(self, "Export", f"{exc}\n\nClip those values to 1 and export anyway?")
+                if answer == QMessageBox.StandardButton.Yes:
+                    QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True))
+                return
+            self.show_error("Export failed", exc)
+
+        self.run_job(files.export_image, self.doc, path, dtype=dtype, exposure=exposure, clip=clip,
+                     name="Exporting", on_done=lambda p: self.statusBar().showMessage(f"Exported {p}", 5000),
+                     on_failed=failed)
+
+    def maybe_save(self) -> bool:
+        """Ask about unsaved changes. True when it is fine to go on (saved or discarded)."""
+        if self.doc is None or not self.doc.is_dirty():
+            return True
+        answer = self.ask_unsaved()
+        if answer == QMessageBox.StandardButton.Cancel:
+            return False
+        if answer == QMessageBox.StandardButton.Discard:
+            return True
+        if not self.save():
+            return False
+        if self.job is not None:  # a threaded save: wait for it before going on
+            job = self.job
+            while job.running:
+                QGuiApplication.processEvents()
+                job.join(0.02)
+        return not self.doc.is_dirty()
+
+    def ask_unsaved(self) -> QMessageBox.StandardButton:
+        """The unsaved-changes prompt (Save / Discard / Cancel)."""
+        box = QMessageBox(QMessageBox.Icon.Warning, APP_NAME, "The document has unsaved changes.",
+                          QMessageBox.StandardButton.Save | QMessageBox.StandardButton.Discard
+                          | QMessageBox.StandardButton.Cancel, self)
+        box.setInformativeText("Save the targets and albedo changes before closing?")
+        box.setDefaultButton(QMessageBox.StandardButton.Save)
+        box.setObjectName("unsaved_prompt")
+        return QMessageBox.StandardButton(box.exec())
+
+    def closeEvent(self, event) -> None:  # noqa: N802 - Qt override
+        if self.job is not None:
+            self.job.cancel()
+            self.job.join(5.0)
+        if not self.maybe_save():
+            event.ignore()
+            return
+        self._teardown()
+        event.accept()
+
+    # ================================================================== recent files
+    def _recent(self) -> list[str]:
+        value = self.settings.value("recent", [])
+        if isinstance(value, str):
+            value = [value]
+        return [str(v) for v in (value or [])]
+
+    def _add_recent(self, path) -> None:
+        path = str(Path(path).resolve())
+        items = [path] + [p for p in self._recent() if p != path]
+        self.settings.setValue("recent", items[:MAX_RECENT])
+        self.settings.setValue("last_dir", str(Path(path).parent))
+
+    def _last_dir(self) -> str:
+        return str(self.settings.value("last_dir", str(Path.home())))
+
+    def _fill_recent(self) -> None:
+        self.recent_menu.clear()
+        items = self._recent()
+        for p in items:
+            a = self.recent_menu.addAction(p)
+            a.triggered.connect(lambda _c=False, p=p: self.open_path(p))
+        if not items:
+            self.recent_menu.addAction("(none)").setEnabled(False)
+
+    def resizeEvent(self, e) -> None:  # noqa: N802
+        super().resizeEvent(e)
+        if self.preview is not None and self.preview.view == View.COMPONENTS:
+            self._update_grid()
