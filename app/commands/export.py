@@ -1,0 +1,31 @@
+"""``albedit export``: write a session's saved edit (its free target's kappa) as an image."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from app.commands.recolor import decomposition_for, write_edit
+from engine.errors import SessionError
+from engine.recolor import recolor
+from engine.session import Session
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("session", type=Path, help="a captured session folder with a saved edit")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="output image (.exr, .tif, .png)")
+    parser.add_argument("--half", action="store_true", help="EXR: write half floats")
+
+
+def run(args) -> int:
+    session = Session.open(args.session)
+    edit = session.state.get("edit")
+    if not edit or "kappa" not in edit:
+        raise SessionError(f"session {args.session} has no saved edit: use `albedit recolor` or save from the app")
+    d, plan = decomposition_for(session, None)
+    kappa = np.asarray(edit["kappa"], float)
+    write_edit(args.output, recolor(d, kappa), plan=plan, kappa_value=kappa, half=args.half)
+    print(f"wrote {args.output}", file=sys.stderr)
+    return 0
