@@ -1,0 +1,211 @@
+"""The virtual rig: a simulated camera-projector pair with exact ground truth.
+
+``devices.open_rig("virtual:cornell", ideal=True)`` opens the Cornell-like box of the paper's
+Fig. 6; ``"virtual:wedge"`` (Figs. 7-9) and ``"virtual:three"`` (Fig. 10) are the others, and
+``"virtual:/path/scene.json"`` opens a scene file. The scene is Lambertian and its light
+transport exactly linear: direct light (an ambient area light and the projector) at pixel
+resolution, indirect light through a patch radiosity solve (see :mod:`devices.virtual.setup`
+and :mod:`devices.virtual.transport`). ``rig.truth`` gives noise-free photographs, recoloured
+photographs and interaction components computed from the transport itself.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from devices.base import Rig
+from devices.registry import Availability
+from devices.virtual.camera import CameraModel, VirtualCamera
+from devices.virtual.projector import ProjectorModel, VirtualProjector
+from devices.virtual.render import Renderer
+from devices.virtual.scene import Scene, load_scene, scene_names
+from devices.virtual.setup import Geometry, Setup, load_or_build
+from devices.virtual.truth import Components, Truth
+from engine._checks import check_choice
+from engine.errors import InputError
+
+__all__ = ["open_rig", "probe", "VirtualRig", "Truth", "Components", "CameraModel", "ProjectorModel",
+           "default_cache_dir", "scene_names", "load_scene"]
+
+_OPTIONS = ("ideal", "seed", "projector", "resolution", "projector_resolution", "ambient", "cache_dir",
+            "patch_size", "progress")
+
+
+def default_cache_dir() -> Path:
+    """Per-user cache of set-ups: ``$XDG_CACHE_HOME/albedit/virtual`` (``~/.cache/...``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "albedit" / "virtual"
+
+
+class VirtualRig(Rig):
+    """A :class:`devices.base.Rig` over a simulated scene, with a switchable ambient light.
+
+    Attributes
+    ----------
+    camera : VirtualCamera
+    projector : VirtualProjector
+    targets : dict[str, (H, W) bool]
+        The scene's named targets rasterised into camera masks.
+    truth : Truth
+    scene : Scene
+    setup : Setup
+        The precomputed transport (for tests and benchmarks).
+    """
+
+    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer):
+        super().__init__(name, camera, projector, targets=targets, truth=truth)
+        self._renderer = renderer
+        self.scene: Scene = renderer.scene
+        self.setup: Setup = renderer.setup
+
+    @property
+    def ambient(self) -> bool:
+        """Whether the scene's ambient light is on (captures see it)."""
+        return self._renderer.ambient
+
+    @ambient.setter
+    def ambient(self, value: bool) -> None:
+        if not isinstance(value, (bool, np.bool_)):
+            raise InputError(f"ambient must be True or False, got {value!r}")
+        self._renderer.ambient = bool(value)
+
+    def flood(self) -> None:
+        """Apply the scene's natural lighting: ambient on/off and the projector flood level."""
+        self.ambient = self.scene.lighting["ambient"]
+        hp, wp = self.projector.resolution
+        self.projector.show(np.full((hp, wp, 3), self.scene.lighting["projector_flood"], np.float32))
+
+
+def probe() -> list[Availability]:
+    """Every shipped scene as ``virtual:NAME`` (always available).
+
+    Examples
+    --------
+    >>> [a.name for a in probe()][:1]
+    ['virtual:cornell']
+    """
+    return [Availability(f"virtual:{n}", True, "simulated rig") for n in scene_names()]
+
+
+def open_rig(arg: str, **options) -> VirtualRig:
+    """Open a virtual rig on a scene.
+
+    Parameters
+    ----------
+    arg : str
+        Scene name (``"cornell"``, ``"wedge"``, ``"three"``) or path to a scene ``.json``.
+    ideal : bool, default False
+        Turn every imperfection off: no noise, linear projector response, no black levels,
+        no quantisation, identity crosstalk (the camera still clips, at 1e12 electrons).
+    seed : int, numpy.random.Generator or None, default 0
+        Seed of the camera's noise generator (None: fresh entropy).
+    projector : {"coaxial", "offset"}, default "coaxial"
+        Co-axial: the projector shares the camera's pose and frustum (identity
+        correspondences at equal resolution, the paper's simulations). Offset: the scene's
+        ``projector.offset`` pose (needs calibration; some pixels are shadowed or unlit).
+    resolution : (H, W), default (256, 256)
+        Camera resolution.
+    projector_resolution : (Hp, Wp), default = ``resolution``
+    ambient : bool, default True
+        Ambient light on at start (``rig.ambient`` switches it later).
+    cache_dir : str, Path, None or False, default None
+        Where set-ups are cached (None: :func:`default_cache_dir`; False: no cache).
+    patch_size : float, optional
+        Override the scene's patch size (metres) of the indirect-light grid.
+    progress : callable, optional
+        ``progress(step, total, message)`` during set-up.
+
+    Returns
+    -------
+    VirtualRig
+
+    Raises
+    ------
+    InputError
+        Unknown scene, invalid scene file or bad option.
+
+    Examples
+    --------
+    >>> with open_rig("wedge", ideal=True, resolution=(16, 16), cache_dir=False, patch_size=0.3) as rig:
+    ...     frame = rig.camera.capture()
+    >>> frame.image.shape, frame.image.dtype
+    ((16, 16, 3), dtype('float32'))
+    """
+    unknown = sorted(set(options) - set(_OPTIONS))
+    if unknown:
+        raise InputError(f"unknown virtual rig option(s) {unknown}; expected some of {list(_OPTIONS)}")
+    scene = load_scene(arg) if arg else _no_scene()
+    ideal = _flag(options.get("ideal", False), "ideal")
+    ambient = _flag(options.get("ambient", True), "ambient")
+    seed = options.get("seed", 0)
+    if not (seed is None or isinstance(seed, np.random.Generator)
+            or (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0)):
+        raise InputError(f"seed must be a non-negative int, a numpy Generator or None, got {seed!r}")
+    kind = check_choice("projector", options.get("projector", "coaxial"), ["coaxial", "offset"])
+    if kind == "offset" and scene.projector_offset is None:
+        raise InputError(f"scene {scene.name!r} has no projector.offset pose; use projector='coaxial'")
+    res = _resolution(options.get("resolution", (256, 256)), "resolution")
+    pres = _resolution(options.get("projector_resolution", res), "projector_resolution")
+    patch = options.get("patch_size", None)
+    if patch is None:
+        patch = scene.patch_size
+    elif isinstance(patch, bool) or not isinstance(patch, (int, float)) or not np.isfinite(patch) or patch <= 0:
+        raise InputError(f"patch_size must be a positive number of metres, got {patch!r}")
+    cache = options.get("cache_dir", None)
+    if cache is None:
+        cache = default_cache_dir()
+    elif cache is False:
+        cache = None
+    elif not isinstance(cache, (str, os.PathLike)):
+        raise InputError(f"cache_dir must be a path, None or False, got {cache!r}")
+
+    setup = load_or_build(scene, Geometry(res, kind, pres, float(patch)), None if cache is None else Path(cache),
+                          progress=options.get("progress"))
+    renderer = Renderer(scene, setup)
+    renderer.ambient = ambient
+    pmodel = ProjectorModel.perfect() if ideal else ProjectorModel.realistic()
+    cmodel = CameraModel.perfect() if ideal else CameraModel.realistic()
+    projector = VirtualProjector(pmodel, pres)
+    name = f"virtual:{arg}"
+    camera = VirtualCamera(renderer, projector, cmodel, np.random.default_rng(seed), name)
+    truth = Truth(renderer, pmodel, cmodel, pres)
+    return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer)
+
+
+def target_masks(scene: Scene, setup: Setup) -> dict[str, np.ndarray]:
+    """Rasterise the scene's targets into camera masks ``{name: (H, W) bool}``."""
+    h, w = (int(x) for x in setup.resolution)
+    n = h * w
+    quad, a, b = setup.pixel_quad, setup.a[:n], setup.b[:n]
+    out = {}
+    for name, pieces in scene.targets.items():
+        m = np.zeros(n, bool)
+        for q, (a0, b0, a1, b1) in pieces:
+            m |= (quad == q) & (a >= a0) & (a <= a1) & (b >= b0) & (b <= b1)
+        out[name] = m.reshape(h, w)
+    return out
+
+
+def _no_scene():
+    raise InputError(f"virtual rig needs a scene: 'virtual:NAME' with NAME one of {scene_names()}, "
+                     "or 'virtual:/path/scene.json'")
+
+
+def _flag(value, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def _resolution(value, name: str) -> tuple[int, int]:
+    try:
+        h, w = value
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a pair (H, W) of pixel counts, got {value!r}") from None
+    for v in (h, w):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 4 <= v <= 16384:
+            raise InputError(f"{name} must be a pair (H, W) of integers in [4, 16384], got {value!r}")
+    return int(h), int(w)

@@ -1,0 +1,205 @@
+"""The virtual camera: a linear RAW sensor with shot noise, read noise, ADC and clipping."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from devices.base import Frame
+from engine.errors import InputError
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Sensor parameters (the ground truth of the camera's noise and scale).
+
+    Attributes
+    ----------
+    electrons_per_radiance : float
+        Photo-electrons per unit scene radiance per second of exposure.
+    electrons_per_dn : float
+        Electrons per raw count at gain 1 (gain g divides it by g).
+    black_level : float
+        Raw offset added to every pixel (DN).
+    read_noise : float
+        Gaussian read noise, electrons rms.
+    bits : int
+        ADC bit depth; raw values are integers in ``[0, 2**bits - 1]``.
+    full_well : float
+        Electrons at which a pixel saturates.
+    ideal : bool
+        No noise, no quantisation, no black level; saturation far beyond any use.
+
+    Notes
+    -----
+    ``raw = clip(round((min(Poisson(radiance * k * t), full_well) + N(0, read^2)) * g / e_dn
+    + black), 0, white)`` and ``image = (raw - black) / (t * g * calibration)`` with
+    ``calibration = k / e_dn``, so the mean image equals the radiance at any exposure ``t``
+    and gain ``g`` (below saturation).
+
+    Examples
+    --------
+    >>> CameraModel.perfect().develop(CameraModel.perfect().expose(np.ones((1, 1, 3)), 0.1, 1.0, None)[0], 0.1, 1.0)[0, 0].tolist()
+    [1.0, 1.0, 1.0]
+    """
+
+    electrons_per_radiance: float = 4.0e5
+    electrons_per_dn: float = 1.25
+    black_level: float = 512.0
+    read_noise: float = 3.0
+    bits: int = 14
+    full_well: float = 20000.0
+    ideal: bool = False
+
+    @classmethod
+    def realistic(cls) -> "CameraModel":
+        """A 14-bit RAW camera: 20 000 e- full well, 3 e- read noise, black level 512."""
+        return cls()
+
+    @classmethod
+    def perfect(cls) -> "CameraModel":
+        """The ideal camera: returns the radiance exactly, clipping only at 1e12 electrons."""
+        return cls(black_level=0.0, read_noise=0.0, bits=64, full_well=1e12, ideal=True)
+
+    @property
+    def calibration(self) -> float:
+        """Raw counts per unit radiance per second at gain 1."""
+        return self.electrons_per_radiance / self.electrons_per_dn
+
+    @property
+    def white_level(self) -> float:
+        """Largest raw value (DN)."""
+        return float(2**self.bits - 1)
+
+    def expose(self, radiance: np.ndarray, exposure: float, gain: float, rng: np.random.Generator | None):
+        """Raw counts and saturation mask of one exposure.
+
+        Parameters
+        ----------
+        radiance : (H, W, 3) float
+            Noise-free scene radiance.
+        exposure : float
+            Seconds.
+        gain : float
+            Linear gain.
+        rng : numpy.random.Generator or None
+            Noise source (unused when ideal).
+
+        Returns
+        -------
+        raw : (H, W, 3) float64
+            Raw values (integers in DN unless ideal).
+        saturated : (H, W) bool
+            Any channel clipped (full well or ADC white level).
+        """
+        electrons = np.asarray(radiance, np.float64) * (self.electrons_per_radiance * exposure)
+        if not self.ideal:
+            electrons = rng.poisson(electrons).astype(np.float64)
+        clipped = electrons >= self.full_well
+        electrons = np.minimum(electrons, self.full_well)
+        if not self.ideal and self.read_noise > 0:
+            electrons += self.read_noise * rng.standard_normal(electrons.shape)
+        raw = electrons * (gain / self.electrons_per_dn) + self.black_level
+        if not self.ideal:
+            raw = np.rint(raw)
+        white = self.white_level
+        clipped |= raw >= white
+        raw = np.clip(raw, 0.0, white)
+        return raw, clipped.any(axis=-1)
+
+    def develop(self, raw: np.ndarray, exposure: float, gain: float) -> np.ndarray:
+        """Linear radiance from raw values: ``(raw - black) / (exposure * gain * calibration)``."""
+        return ((raw - self.black_level) / (exposure * gain * self.calibration)).astype(np.float32)
+
+
+class VirtualCamera:
+    """The camera of a virtual rig (implements :class:`devices.base.Camera`).
+
+    It photographs the scene lit by the ambient light (if the rig's switch is on) and by
+    whatever the rig's projector currently emits.
+
+    Parameters
+    ----------
+    renderer : devices.virtual.render.Renderer
+    projector : devices.virtual.projector.VirtualProjector
+    model : CameraModel
+    rng : numpy.random.Generator
+        The camera's own noise source.
+    name : str
+        Rig name, recorded in frame metadata.
+
+    Attributes
+    ----------
+    resolution : (H, W)
+    exposure : float
+        Seconds, > 0 (validated when set).
+    gain : float
+        Linear gain, >= 1 (validated when set).
+    model : CameraModel
+    rng : numpy.random.Generator
+    captures : int
+        Number of frames taken.
+    """
+
+    def __init__(self, renderer, projector, model: CameraModel, rng: np.random.Generator, name: str):
+        self._renderer = renderer
+        self._projector = projector
+        self.model = model
+        self.rng = rng
+        self.name = name
+        self.resolution = renderer.shape
+        self._exposure = 1.0 / 30.0
+        self._gain = 1.0
+        self.captures = 0
+
+    @property
+    def exposure(self) -> float:
+        """Exposure time in seconds."""
+        return self._exposure
+
+    @exposure.setter
+    def exposure(self, value: float) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(value) or not 0 < value <= 3600:
+            raise InputError(f"exposure must be a number of seconds in (0, 3600], got {value!r}")
+        self._exposure = float(value)
+
+    @property
+    def gain(self) -> float:
+        """Linear sensor gain (ISO / base ISO)."""
+        return self._gain
+
+    @gain.setter
+    def gain(self, value: float) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(value) or not 1 <= value <= 1024:
+            raise InputError(f"gain must be a number in [1, 1024], got {value!r}")
+        self._gain = float(value)
+
+    def capture(self) -> Frame:
+        """Take one frame of the scene as lit now.
+
+        Returns
+        -------
+        Frame
+            ``image`` linear radiance (black removed, divided by exposure, gain and the
+            calibration constant), ``saturated`` clipped pixels, metadata.
+        """
+        radiance = self._renderer.render(self._projector.emitted)
+        raw, saturated = self.model.expose(radiance, self._exposure, self._gain, self.rng)
+        if self.model.ideal:
+            image = np.where(saturated[..., None], self.model.develop(raw, self._exposure, self._gain),
+                             radiance).astype(np.float32)
+        else:
+            image = self.model.develop(raw, self._exposure, self._gain)
+        self.captures += 1
+        meta = {"device": self.name, "ideal": self.model.ideal, "ambient": bool(self._renderer.ambient),
+                "capture": self.captures, "calibration": self.model.calibration,
+                "white_level": self.model.white_level, "read_noise_e": self.model.read_noise,
+                "electrons_per_dn": self.model.electrons_per_dn}
+        return Frame(image=image, exposure=self._exposure, gain=self._gain,
+                     black_level=self.model.black_level, saturated=saturated, metadata=meta)
+
+    def __repr__(self) -> str:
+        return f"VirtualCamera({self.resolution}, ideal={self.model.ideal})"

@@ -1,0 +1,106 @@
+"""Noise-free radiance of the virtual scene for a given ambient state and projector output."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from devices.virtual.scene import Scene
+from devices.virtual.setup import Setup
+from devices.virtual.transport import Resolvent
+
+
+class Renderer:
+    """Turns "ambient light on/off" and the projector's emitted light into camera radiance.
+
+    Parameters
+    ----------
+    scene : Scene
+    setup : Setup
+
+    Attributes
+    ----------
+    rho : (Ns, 3) float64
+        Albedo of every sample (0 for pixels that see no surface).
+    base : Resolvent
+        The scene's transport, factored once.
+    ambient_light : (Ns, 3) float64
+        Direct light (irradiance / pi) from the ambient (emitting) quads.
+    emission : (H*W, 3) float64
+        Radiance emitted towards the camera at pixels that see a light.
+    ambient : bool
+        Whether the ambient light is on (the rig's switch; captures read it).
+    """
+
+    def __init__(self, scene: Scene, setup: Setup):
+        self.scene = scene
+        self.setup = setup
+        h, w = (int(x) for x in setup.resolution)
+        self.shape = (h, w)
+        live = setup.quad >= 0
+        self.rho = np.where(live[:, None], scene.albedo[np.maximum(setup.quad, 0)], 0.0)
+        self.base = Resolvent(setup, self.rho)
+        self.ambient_light = setup.light_ff @ scene.emission[setup.light_quads] if len(setup.light_quads) \
+            else np.zeros((len(setup.quad), 3))
+        pq = setup.pixel_quad
+        self.emission = np.where((pq >= 0)[:, None], scene.emission[np.maximum(pq, 0)], 0.0)
+        self.ambient = True
+        self._lit = np.flatnonzero(setup.proj_lit)
+        self._lit_pixel = setup.proj_index[self._lit]
+        self._lit_gain = setup.proj_factor[self._lit, None] * scene.projector_power[None, :]
+        self._cache32 = (self.ambient_light.astype(np.float32), self._lit_gain.astype(np.float32),
+                         self.emission.astype(np.float32))
+
+    @property
+    def n_pixels(self) -> int:
+        """``H * W``."""
+        return self.shape[0] * self.shape[1]
+
+    def direct_light(self, emitted: np.ndarray | None, *, ambient: bool, dtype=np.float32) -> np.ndarray:
+        """Direct light ``E`` (irradiance / pi) at every sample.
+
+        Parameters
+        ----------
+        emitted : (Hp, Wp, 3) float or None
+            Linear light the projector emits (relative to full white), None for none.
+        ambient : bool
+            Include the ambient light.
+        dtype : float32 or float64
+
+        Returns
+        -------
+        (Ns, 3) ``dtype``
+        """
+        f32 = np.dtype(dtype) == np.float32
+        amb, gain = (self._cache32[0], self._cache32[1]) if f32 else (self.ambient_light, self._lit_gain)
+        e = amb.copy() if ambient else np.zeros(amb.shape, amb.dtype)
+        if emitted is not None:
+            flat = np.asarray(emitted).reshape(-1, 3)
+            e[self._lit] += flat[self._lit_pixel].astype(e.dtype) * gain
+        return e
+
+    def to_image(self, radiance: np.ndarray, *, ambient: bool) -> np.ndarray:
+        """Camera image ``(H, W, 3)`` from sample radiance (adds the lights seen if on)."""
+        img = radiance[:self.n_pixels]
+        if ambient:
+            em = self._cache32[2] if radiance.dtype == np.float32 else self.emission
+            img = img + em
+        return img.reshape(self.shape + (3,))
+
+    def render(self, emitted: np.ndarray | None, *, ambient: bool | None = None, dtype=np.float32) -> np.ndarray:
+        """Noise-free radiance seen by the camera.
+
+        Parameters
+        ----------
+        emitted : (Hp, Wp, 3) or None
+            Projector output (see :meth:`direct_light`).
+        ambient : bool, optional
+            Defaults to the rig's current :attr:`ambient` state.
+        dtype : float32 or float64
+
+        Returns
+        -------
+        (H, W, 3) ``dtype``
+        """
+        ambient = self.ambient if ambient is None else ambient
+        e = self.direct_light(emitted, ambient=ambient, dtype=dtype)
+        return self.to_image(self.base.solve(e), ambient=ambient)

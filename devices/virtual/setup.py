@@ -1,0 +1,538 @@
+"""One-off set-up of the virtual rig's light transport, cached on disk.
+
+The set-up turns a :class:`~devices.virtual.scene.Scene` and the rig's geometry options into
+the arrays every capture reuses:
+
+* **samples** — one per camera pixel (index ``i * W + j``; pixels that see no front surface
+  are inert samples of albedo 0), followed by *hidden* samples: a regular grid on every quad,
+  kept only where the camera does not see the surface. Each sample has a point, a quad, local
+  coordinates and an area.
+* **patches** — each quad cut into a grid of cells about ``patch_size`` wide. The patch
+  radiance is the area-weighted mean of its samples' radiance: ``B = Mavg L``.
+* **form factors** — ``Gn[m, j]``: from the centre of patch ``m`` to patch ``j``, Lambert's
+  exact polygon form factor (clipped to the receiver's hemisphere) times the kernel-weighted
+  fraction of shadow rays to ``vis_samples**2`` points of ``j`` that are unblocked; a sample's
+  form factors are the bilinear interpolation ``W`` of its quad's patch-centre values, so
+  ``G = W Gn`` is never stored densely.
+* **ambient light** — the form factor of every sample to every emitting quad, with the same
+  polygon formula and ``light_samples**2`` shadow rays (soft shadows at pixel resolution).
+* **projector** — for every sample, the projector pixel nearest to its projection (each
+  pixel sample is lit by exactly one projector pixel, so one-pixel stripes resolve), whether
+  it is lit (inside the frustum, facing the projector, and for camera pixels an unblocked
+  shadow ray to the projector's centre; for hidden samples, that pixel's own ray reaching the
+  same quad, so a co-axial projector never lights what the camera cannot see), and the
+  geometric irradiance factor ``cos(theta) / (d^2 cos^3(alpha))`` of a pinhole projector
+  whose pixels all emit the same flux.
+
+Arrays are stored as ``.npz`` (never pickle), keyed by a hash of the scene file's content,
+the options that change geometry and :data:`MODEL_VERSION`; a missing or corrupt cache file
+is rebuilt, and deleting the cache directory is always safe.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from devices.virtual.geometry import (Quads, View, blocker_table, cast_rays, occluded,
+                                      polygon_form_factor, quad_corners)
+from devices.virtual.scene import Scene
+from engine.progress import report
+
+MODEL_VERSION = 4
+
+# Shadow rays per edge of a patch (form factors) and of a light (ambient light).
+VIS_SAMPLES = 3
+LIGHT_SAMPLES = 4
+# Hidden samples per edge of a patch.
+HIDDEN_PER_PATCH = 3
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """The options that change the set-up (part of the cache key)."""
+
+    resolution: tuple[int, int]
+    projector: str
+    projector_resolution: tuple[int, int]
+    patch_size: float
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Precomputed light-transport arrays of one scene and rig geometry.
+
+    ``Ns`` samples (the first ``H * W`` are the camera pixels), ``P`` patches.
+
+    Attributes
+    ----------
+    quad : (Ns,) int64
+        Quad of each sample, -1 for pixels that see no front surface.
+    a, b : (Ns,) float64
+        Local coordinates of each sample on its quad.
+    points : (Ns, 3) float64
+        Sample positions.
+    area : (Ns,) float64
+        Surface area represented by each sample (m^2).
+    patch : (Ns,) int64
+        Patch of each sample, -1 for inert pixels.
+    patch_quad : (P,) int64
+        Quad of each patch.
+    patch_area : (P,) float64
+        Geometric area of each patch.
+    mavg : (P, Ns) scipy.sparse.csr_matrix
+        Area-weighted averaging: ``B = mavg @ L``.
+    interp : (Ns, P) scipy.sparse.csr_matrix
+        Bilinear interpolation of patch-centre form factors to samples (rows sum to 1).
+    gn : (P, P) float64
+        Form factors from patch centres to patches (rows sum to at most 1).
+    light_quads : (Lq,) int64
+        Emitting quads.
+    light_ff : (Ns, Lq) float64
+        Form factor (with visibility) from each sample to each emitting quad.
+    proj_index : (Ns,) int64
+        Row-major projector pixel lighting each sample (0 where unlit).
+    proj_lit : (Ns,) bool
+        Sample reached by the projector (in its frustum, not shadowed, facing it).
+    proj_factor : (Ns,) float64
+        Geometric irradiance factor ``cos(theta) / (d^2 cos^3(alpha))`` (0 where unlit).
+    proj_xy : (H*W, 2) float64
+        Continuous projector coordinates (x, y) of each pixel's surface point, NaN where the
+        pixel sees no surface.
+    pixel_quad : (H*W,) int64
+        Quad seen by each pixel (front side), -1 for none.
+    resolution, projector_resolution : (2,) int64
+    rescaled_rows : int
+        Number of patch-centre form-factor rows whose sum exceeded 1 by discretisation and
+        were scaled back to 1 (energy conservation); 0 for convex enclosures.
+    """
+
+    quad: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    points: np.ndarray
+    area: np.ndarray
+    patch: np.ndarray
+    patch_quad: np.ndarray
+    patch_area: np.ndarray
+    mavg: sp.csr_matrix
+    interp: sp.csr_matrix
+    gn: np.ndarray
+    light_quads: np.ndarray
+    light_ff: np.ndarray
+    proj_index: np.ndarray
+    proj_lit: np.ndarray
+    proj_factor: np.ndarray
+    proj_xy: np.ndarray
+    pixel_quad: np.ndarray
+    resolution: np.ndarray
+    projector_resolution: np.ndarray
+    rescaled_rows: int
+
+    @property
+    def n_pixels(self) -> int:
+        """``H * W``."""
+        return int(self.resolution[0] * self.resolution[1])
+
+
+def views(scene: Scene, geometry: Geometry) -> tuple[View, View]:
+    """The camera and projector views of ``scene`` for ``geometry``.
+
+    The co-axial projector shares the camera's pose and frustum (sampled at its own
+    resolution); the offset projector uses the scene's ``projector.offset`` pose.
+    """
+    c = scene.camera
+    camera = View.look_at(c.position, c.look_at, c.up, c.fov_deg, geometry.resolution)
+    if geometry.projector == "coaxial":
+        return camera, camera.rescaled(geometry.projector_resolution)
+    p = scene.projector_offset
+    return camera, View.look_at(p.position, p.look_at, p.up, p.fov_deg, geometry.projector_resolution)
+
+
+def patch_grid(scene: Scene, patch_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Patch counts along ``u`` and ``v`` of every quad, and each quad's first patch index."""
+    nu = np.maximum(1, np.ceil(np.linalg.norm(scene.quads.u, axis=1) / patch_size - 1e-9)).astype(np.int64)
+    nv = np.maximum(1, np.ceil(np.linalg.norm(scene.quads.v, axis=1) / patch_size - 1e-9)).astype(np.int64)
+    offset = np.concatenate([[0], np.cumsum(nu * nv)])
+    return nu, nv, offset
+
+
+def load_or_build(scene: Scene, geometry: Geometry, cache_dir: Path | None, *, progress=None) -> Setup:
+    """Return the set-up for ``scene`` and ``geometry``, from the cache when possible.
+
+    The patch form factors depend only on the scene and the patch size, so they are cached
+    in a file of their own and shared by every resolution and projector pose.
+
+    Parameters
+    ----------
+    scene : Scene
+    geometry : Geometry
+    cache_dir : Path or None
+        Directory of ``.npz`` cache files (created if needed); None disables caching.
+    progress : callable, optional
+        ``progress(step, total, message)``.
+
+    Returns
+    -------
+    Setup
+    """
+    if cache_dir is None:
+        return build(scene, geometry, progress=progress)
+    common = {"scene": scene.digest, "patch_size": repr(float(geometry.patch_size)), "version": MODEL_VERSION,
+              "samples": [VIS_SAMPLES, LIGHT_SAMPLES, HIDDEN_PER_PATCH]}
+    ff_key = _key(common)
+    key = _key(dict(common, resolution=list(geometry.resolution), projector=geometry.projector,
+                    projector_resolution=list(geometry.projector_resolution)))
+    path = Path(cache_dir) / f"{scene.name}-{key}.npz"
+    ff_path = Path(cache_dir) / f"{scene.name}-ff-{ff_key}.npz"
+    cached = _load(path)
+    if cached is not None:
+        return cached
+    ff = _load_arrays(ff_path, ("gn", "rescaled_rows"))
+    setup = build(scene, geometry, progress=progress,
+                  form_factors=None if ff is None else (ff["gn"], int(ff["rescaled_rows"])))
+    if ff is None:
+        _save_arrays(ff_path, {"gn": setup.gn, "rescaled_rows": np.array(setup.rescaled_rows)})
+    _save(path, setup)
+    return setup
+
+
+def _key(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def _save_arrays(path: Path, arrays: dict) -> None:
+    """Write ``arrays`` to ``path`` atomically (temp file + rename); failures only cost time."""
+    arrays = dict(arrays, version=np.array(MODEL_VERSION))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    except OSError:
+        pass
+
+
+def _load_arrays(path: Path, names) -> dict | None:
+    """Read arrays saved by :func:`_save_arrays`; None if missing, corrupt or outdated."""
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if int(z["version"]) != MODEL_VERSION:
+                return None
+            return {n: z[n] for n in names}
+    except Exception:  # corrupt, truncated or foreign file: rebuild
+        return None
+
+
+def _save(path: Path, setup: Setup) -> None:
+    arrays = {}
+    for f in fields(Setup):
+        value = getattr(setup, f.name)
+        if sp.issparse(value):
+            arrays[f"{f.name}__data"] = value.data
+            arrays[f"{f.name}__indices"] = value.indices
+            arrays[f"{f.name}__indptr"] = value.indptr
+            arrays[f"{f.name}__shape"] = np.array(value.shape)
+        else:
+            arrays[f.name] = np.asarray(value)
+    _save_arrays(path, arrays)
+
+
+def _load(path: Path) -> Setup | None:
+    names = []
+    for f in fields(Setup):
+        if f.name in ("mavg", "interp"):
+            names += [f"{f.name}__data", f"{f.name}__indices", f"{f.name}__indptr", f"{f.name}__shape"]
+        else:
+            names.append(f.name)
+    z = _load_arrays(path, names)
+    if z is None:
+        return None
+    try:
+        kw = {}
+        for f in fields(Setup):
+            if f.name in ("mavg", "interp"):
+                shape = tuple(int(x) for x in z[f"{f.name}__shape"])
+                kw[f.name] = sp.csr_matrix((z[f"{f.name}__data"], z[f"{f.name}__indices"], z[f"{f.name}__indptr"]),
+                                           shape=shape)
+            else:
+                kw[f.name] = z[f.name]
+        kw["rescaled_rows"] = int(kw["rescaled_rows"])
+        return Setup(**kw)
+    except Exception:  # inconsistent arrays: rebuild
+        return None
+
+
+def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None) -> Setup:
+    """Compute the set-up (no cache). See the module docstring for the model.
+
+    Parameters
+    ----------
+    scene : Scene
+    geometry : Geometry
+    progress : callable, optional
+        ``progress(step, total, message)``.
+    form_factors : (gn, rescaled_rows), optional
+        Patch form factors computed before for the same scene and patch size.
+
+    Returns
+    -------
+    Setup
+    """
+    quads = scene.quads
+    normal = quads.normal
+    camera, projector = views(scene, geometry)
+    h, w = geometry.resolution
+    steps = 5
+    report(progress, 0, steps, "casting camera rays")
+
+    # --- camera pixels -------------------------------------------------------------------
+    dirs = camera.pixel_directions()
+    hits = cast_rays(camera.position, dirs, quads)
+    pix_ok = (hits.quad >= 0) & hits.front
+    pixel_quad = np.where(pix_ok, hits.quad, -1)
+    t = np.where(pix_ok, hits.t, 0.0)
+    pix_points = camera.position + t[:, None] * dirs
+    cos_view = np.abs(np.einsum("ij,ij->i", dirs, normal[np.maximum(pixel_quad, 0)]))
+    omega = camera.pixel_solid_angle_factor(dirs) / (camera.fx * camera.fy)
+    pix_area = np.where(pix_ok, omega * t**2 / np.maximum(cos_view, 1e-3), 0.0)
+
+    # --- hidden samples ------------------------------------------------------------------
+    nu, nv, offset = patch_grid(scene, geometry.patch_size)
+    hq, ha, hb, harea = [], [], [], []
+    for q in range(len(quads)):
+        gu, gv = nu[q] * HIDDEN_PER_PATCH, nv[q] * HIDDEN_PER_PATCH
+        a, b = np.meshgrid((np.arange(gu) + 0.5) / gu, (np.arange(gv) + 0.5) / gv, indexing="ij")
+        hq.append(np.full(a.size, q))
+        ha.append(a.ravel())
+        hb.append(b.ravel())
+        harea.append(np.full(a.size, quads.area[q] / (gu * gv)))
+    hq, ha, hb, harea = map(np.concatenate, (hq, ha, hb, harea))
+    hpoints = quads.point(hq, ha, hb)
+    seen = _seen_by(camera, pixel_quad, hpoints, hq, normal)
+    keep = ~seen
+    hq, ha, hb, harea, hpoints = hq[keep], ha[keep], hb[keep], harea[keep], hpoints[keep]
+
+    quad = np.concatenate([pixel_quad, hq])
+    a = np.concatenate([np.where(pix_ok, hits.a, 0.0), ha])
+    b = np.concatenate([np.where(pix_ok, hits.b, 0.0), hb])
+    points = np.concatenate([pix_points, hpoints])
+    area = np.concatenate([pix_area, harea])
+    live = quad >= 0
+    qs = np.maximum(quad, 0)
+    n_samples = len(quad)
+
+    # --- patches, averaging and interpolation ---------------------------------------------
+    pu = np.minimum((a * nu[qs]).astype(np.int64), nu[qs] - 1)
+    pv = np.minimum((b * nv[qs]).astype(np.int64), nv[qs] - 1)
+    patch = np.where(live, offset[qs] + pu * nv[qs] + pv, -1)
+    n_patches = int(offset[-1])
+    patch_quad = np.repeat(np.arange(len(quads)), nu * nv)
+    patch_area = quads.area[patch_quad] / (nu * nv)[patch_quad]
+    rows = np.flatnonzero(live)
+    wsum = np.bincount(patch[rows], weights=area[rows], minlength=n_patches)
+    mavg = sp.csr_matrix((area[rows] / wsum[patch[rows]], (patch[rows], rows)), shape=(n_patches, n_samples))
+    interp = _interpolation(a, b, qs, live, nu, nv, offset, n_patches)
+
+    report(progress, 1, steps, "form factors between patches")
+    centres = _patch_centres(quads, nu, nv)
+    if form_factors is not None and form_factors[0].shape == (n_patches, n_patches):
+        gn, rescaled = form_factors
+    else:
+        gn = _patch_form_factors(quads, centres, patch_quad, nu, nv, offset)
+        sums = gn.sum(axis=1)
+        over = sums > 1.0
+        gn[over] /= sums[over, None]
+        rescaled = int(over.sum())
+
+    report(progress, 2, steps, "ambient light")
+    light_quads = np.flatnonzero(np.any(scene.emission > 0, axis=1))
+    light_ff = np.zeros((n_samples, len(light_quads)))
+    for k, lq in enumerate(light_quads):
+        sel = np.flatnonzero(live & (quad != lq))
+        light_ff[sel, k] = _form_factor_to_quad(points[sel], normal[quad[sel]], quad[sel], quads, lq, LIGHT_SAMPLES)
+
+    report(progress, 3, steps, "projector")
+    pdirs = projector.pixel_directions()
+    phits = cast_rays(projector.position, pdirs, quads)
+    proj_pixel_quad = np.where((phits.quad >= 0) & phits.front, phits.quad, -1)
+    # camera pixels: lit by their nearest projector pixel unless a shadow ray to the
+    # projector is blocked; hidden samples: only where that pixel's own ray reaches their
+    # quad (so a co-axial projector never lights what the camera cannot see)
+    proj_index, inside = projector.nearest_pixel(points)
+    n_pix = h * w
+    facing = np.einsum("ij,ij->i", projector.position - points, normal[qs]) > 0
+    lit = inside & facing & live
+    cand = np.flatnonzero(lit[:n_pix])
+    lit[cand] = ~occluded(points[cand], np.broadcast_to(projector.position, (cand.size, 3)), quads)
+    lit[n_pix:] &= _seen_by(projector, proj_pixel_quad, points[n_pix:], quad[n_pix:], normal)
+    to_p = projector.position - points
+    dist = np.linalg.norm(to_p, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_in = np.einsum("ij,ij->i", to_p, normal[qs]) / dist
+        cos_axis = -np.einsum("ij,j->i", to_p, projector.rotation[2]) / dist
+        factor = cos_in / (dist**2 * cos_axis**3)
+    proj_factor = np.where(lit, factor, 0.0)
+    proj_index = np.where(lit, proj_index, 0)
+    xy, z = projector.project(pix_points)
+    proj_xy = np.where((pix_ok & (z > 0))[:, None], xy, np.nan)
+
+    report(progress, steps, steps, "set-up done")
+    return Setup(quad=quad, a=a, b=b, points=points, area=area, patch=patch,
+                 patch_quad=patch_quad, patch_area=patch_area, mavg=mavg, interp=interp, gn=gn,
+                 light_quads=light_quads, light_ff=light_ff, proj_index=proj_index, proj_lit=lit,
+                 proj_factor=proj_factor, proj_xy=proj_xy, pixel_quad=pixel_quad,
+                 resolution=np.array(geometry.resolution), projector_resolution=np.array(geometry.projector_resolution),
+                 rescaled_rows=rescaled)
+
+
+def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Whether each point (on ``quad``) is what its nearest pixel of ``view`` sees.
+
+    A pixel's ray and a point projecting into that pixel meet the same plane within the
+    pixel's footprint, so "the pixel sees the same quad, from the front" is pixel-resolution
+    visibility (a shadow map without depth bias problems).
+    """
+    idx, inside = view.nearest_pixel(points)
+    q = np.maximum(quad, 0)
+    facing = np.einsum("ij,ij->i", view.position - points, normal[q]) > 0
+    return inside & facing & (quad >= 0) & (pixel_quad[idx] == quad)
+
+
+def _interpolation(a, b, q, live, nu, nv, offset, n_patches) -> sp.csr_matrix:
+    """Bilinear weights from patch centres of each sample's quad (clamped at the borders)."""
+    cols, vals = [], []
+    parts = []
+    for coord, n in ((a, nu[q]), (b, nv[q])):
+        f = np.clip(coord * n - 0.5, 0.0, n - 1.0)
+        i0 = np.minimum(np.floor(f).astype(np.int64), np.maximum(n - 2, 0))
+        frac = f - i0
+        i1 = np.minimum(i0 + 1, n - 1)
+        parts.append((i0, i1, frac))
+    (u0, u1, fu), (v0, v1, fv) = parts
+    base = offset[q]
+    nvq = nv[q]
+    for ui, wu in ((u0, 1 - fu), (u1, fu)):
+        for vi, wv in ((v0, 1 - fv), (v1, fv)):
+            cols.append(base + ui * nvq + vi)
+            vals.append(wu * wv)
+    rows = np.tile(np.arange(len(a)), 4)
+    vals = np.concatenate(vals) * np.tile(live, 4)
+    m = sp.coo_matrix((vals, (rows, np.concatenate(cols))), shape=(len(a), n_patches)).tocsr()
+    m.eliminate_zeros()
+    return m
+
+
+def _patch_centres(quads: Quads, nu, nv) -> np.ndarray:
+    qs, aa, bb = [], [], []
+    for q in range(len(quads)):
+        a, b = np.meshgrid((np.arange(nu[q]) + 0.5) / nu[q], (np.arange(nv[q]) + 0.5) / nv[q], indexing="ij")
+        qs.append(np.full(a.size, q))
+        aa.append(a.ravel())
+        bb.append(b.ravel())
+    qs, aa, bb = map(np.concatenate, (qs, aa, bb))
+    return quads.point(qs, aa, bb)
+
+
+def _patch_corners(quads: Quads, nu, nv) -> np.ndarray:
+    """(P, 4, 3) corners of every patch, counter-clockwise from the front."""
+    out = []
+    for q in range(len(quads)):
+        i, j = np.meshgrid(np.arange(nu[q]), np.arange(nv[q]), indexing="ij")
+        i, j = i.ravel()[:, None], j.ravel()[:, None]
+        du, dv = quads.u[q] / nu[q], quads.v[q] / nv[q]
+        o = quads.origin[q] + i * du + j * dv
+        out.append(np.stack([o, o + du, o + du + dv, o + dv], axis=1))
+    return np.concatenate(out)
+
+
+def _sub_points(corners: np.ndarray, m: int) -> np.ndarray:
+    """(N, m*m, 3) points at the centres of an m x m grid on each parallelogram."""
+    s = (np.arange(m) + 0.5) / m
+    a, b = np.meshgrid(s, s, indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    o = corners[:, 0]
+    u = corners[:, 1] - o
+    v = corners[:, 3] - o
+    return o[:, None] + a[None, :, None] * u[:, None] + b[None, :, None] * v[:, None]
+
+
+def _visibility(x: np.ndarray, nx: np.ndarray, sub: np.ndarray, ne: np.ndarray, quads: Quads,
+                group: np.ndarray, blockers: np.ndarray) -> np.ndarray:
+    """Kernel-weighted fraction of unblocked segments from points ``x`` to ``sub`` points
+    (``group``: quad-pair id of each point, ``blockers``: :func:`blocker_table`)."""
+    n, m = sub.shape[:2]
+    d = sub - x[:, None]
+    r2 = np.einsum("nki,nki->nk", d, d)
+    wk = (np.maximum(np.einsum("nki,ni->nk", d, nx), 0) * np.maximum(-np.einsum("nki,ni->nk", d, ne), 0)
+          / np.maximum(r2, 1e-30) ** 2)
+    blocked = occluded(np.repeat(x, m, axis=0), sub.reshape(-1, 3), quads,
+                       group=np.repeat(group, m), blockers=blockers).reshape(n, m)
+    tot = wk.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vis = np.where(tot > 0, (wk * ~blocked).sum(axis=1) / tot, (~blocked).mean(axis=1))
+    return vis
+
+
+def _patch_form_factors(quads: Quads, centres, patch_quad, nu, nv, offset) -> np.ndarray:
+    """Gn[m, j]: polygon form factor from the centre of patch m to patch j, with visibility."""
+    normal = quads.normal
+    corners = _patch_corners(quads, nu, nv)
+    subs = _sub_points(corners, VIS_SAMPLES)
+    blockers = blocker_table(quads)
+    n_p = len(centres)
+    gn = np.zeros((n_p, n_p))
+    step = max(1, (1 << 16) // max(n_p, 1))
+    cols = np.arange(n_p)
+    for lo in range(0, n_p, step):
+        rows = np.arange(lo, min(lo + step, n_p))
+        r, c = np.repeat(rows, n_p), np.tile(cols, len(rows))
+        keep = patch_quad[r] != patch_quad[c]
+        facing = np.einsum("ij,ij->i", centres[r] - centres[c], normal[patch_quad[c]]) > 0
+        keep &= facing
+        r, c = r[keep], c[keep]
+        f = polygon_form_factor(centres[r], normal[patch_quad[r]], corners[c])
+        pos = f > 0
+        r, c, f = r[pos], c[pos], f[pos]
+        vis = _visibility(centres[r], normal[patch_quad[r]], subs[c], normal[patch_quad[c]], quads,
+                          patch_quad[r] * len(quads) + patch_quad[c], blockers)
+        gn[r, c] = f * vis
+    return gn
+
+
+def _form_factor_to_quad(x: np.ndarray, nx: np.ndarray, xq: np.ndarray, quads: Quads, q: int, m: int) -> np.ndarray:
+    """Form factor with visibility from points ``x`` (normals ``nx``, on quads ``xq``) to quad ``q``."""
+    out = np.zeros(len(x))
+    blockers = blocker_table(quads)
+    corners = quad_corners(quads, np.array([q]))
+    sub = _sub_points(corners, m)[0]
+    nq = quads.normal[q]
+    step = 1 << 15
+    for lo in range(0, len(x), step):
+        xs, ns, qs = x[lo:lo + step], nx[lo:lo + step], xq[lo:lo + step]
+        facing = (xs - quads.origin[q]) @ nq > 0
+        f = np.zeros(len(xs))
+        idx = np.flatnonzero(facing)
+        if idx.size:
+            f[idx] = polygon_form_factor(xs[idx], ns[idx], np.broadcast_to(corners, (idx.size, 4, 3)))
+        idx = np.flatnonzero(f > 0)
+        if idx.size:
+            subs = np.broadcast_to(sub, (idx.size,) + sub.shape)
+            f[idx] *= _visibility(xs[idx], ns[idx], subs, np.broadcast_to(nq, (idx.size, 3)), quads,
+                                  qs[idx] * len(quads) + q, blockers)
+        out[lo:lo + step] = f
+    return out
