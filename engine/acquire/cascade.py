@@ -81,7 +81,7 @@ class _Plan:
         self.base = base
         self.prefix = prefix
         self.emitters = [
-            Emitter(calibration.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau, settings.negative)
+            Emitter(p.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau, settings.negative)
             for p in prepared
         ]
         self.predictors = [Predictor(p.mask) for p in prepared]

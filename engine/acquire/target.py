@@ -2,8 +2,14 @@
 
 D (Sec. 3.3) is measured with high-frequency patterns lit only inside the target's
 projector footprint (Nayar et al. 2006): the direct part ``L⁺ − L⁻`` of the captures minus
-the projector-black reference. Pixels where D is near zero (shadowed, grazing, unlit or not
-decoded) cannot be re-emitted: they are removed from the target and reported.
+the projector-black reference. Because the correspondence says which projector pixel lights
+each camera pixel, ``L⁺`` and ``L⁻`` are means over the captures where that pixel's whole
+3×3 projector neighbourhood was lit (unlit) rather than the max (min) over all captures:
+unbiased under noise, which the max/min is not (it overestimates D by about 2σ), and immune
+to projector blur at square edges. Target pixels the Gray code could not decode (concave
+corners, grazing angles) get their projector pixel from their decoded neighbours
+(:func:`engine.calibrate.fill_correspondence`). Pixels where D is still near zero (shadowed,
+unlit) cannot be re-emitted: they are removed from the target and reported.
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ import numpy as np
 
 from engine._checks import check_mask
 from engine.acquire.recorder import Recorder
-from engine.calibrate import Calibration, direct_image, high_frequency_patterns, projector_footprint
+from engine.calibrate import Calibration, Correspondence, fill_correspondence, high_frequency_patterns, projector_footprint
 from engine.errors import InputError
 
 
@@ -30,21 +36,28 @@ class PreparedTarget:
         Painted pixels that cannot be re-emitted (no correspondence, or D below the floor).
     direct : (H, W, 3) float32
         D per unit of linear projector light, per primary (zero off the target).
+    correspondence : Correspondence
+        The rig's correspondence with the target's undecoded pixels filled in.
+    filled : int
+        Target pixels whose projector pixel was interpolated from their neighbours.
     """
 
     mask: np.ndarray
     unreachable: np.ndarray
     direct: np.ndarray
+    correspondence: Correspondence
+    filled: int = 0
 
     def report(self) -> str:
         """One line for logs and dialogs."""
         painted = int(self.mask.sum() + self.unreachable.sum())
         bad = int(self.unreachable.sum())
+        filled = f" ({self.filled} undecoded pixels interpolated from their neighbours)" if self.filled else ""
         if not bad:
-            return f"all {painted} target pixels can be re-emitted"
+            return f"all {painted} target pixels can be re-emitted{filled}"
         return (
             f"{bad} of {painted} target pixels ({bad / max(painted, 1):.1%}) cannot be re-emitted "
-            "(the projector does not reach them: shadowed, grazing or not decoded) and are left out"
+            f"(the projector does not reach them: shadowed or not decoded) and are left out{filled}"
         )
 
 
@@ -93,7 +106,7 @@ def prepare_target(
     target = check_mask("target", target, calibration.camera_resolution)
     if not target.any():
         raise InputError("target is empty: paint the surface to recolor first")
-    corr = calibration.correspondence
+    corr, filled = fill_correspondence(calibration.correspondence, target)
     painted_valid = target & corr.valid
     if not painted_valid.any():
         raise InputError(
@@ -102,25 +115,53 @@ def prepare_target(
         )
     footprint = projector_footprint(corr, target=painted_valid)
     patterns = high_frequency_patterns(calibration.projector_resolution, mask_projector=footprint, period=period, shifts=shifts)
+    lit_full, unlit_full = _neighbourhood_states(patterns, corr, painted_valid, footprint)
     groups = [(c,) for c in range(3)] if per_channel else [(0, 1, 2)]
     direct = np.zeros(base.shape, np.float32)
     for channels in groups:
         label = "rgb"[channels[0]] if per_channel else "rgb"
-        caps = []
+        plus = np.zeros(base.shape[:2] + (len(channels),), np.float64)
+        minus = np.zeros_like(plus)
         for i, pattern in enumerate(patterns):
             shown = np.zeros_like(pattern)
             shown[..., channels] = pattern[..., channels]
             if calibration.response is not None:
                 shown = calibration.response.linearize(shown)
-            caps.append(recorder.capture(f"{name}-direct-{label}-{i:02d}", shown, meta={"kind": "direct"}))
-        sep = direct_image(np.stack(caps), ambient=base, target=painted_valid)
-        direct[..., channels] = sep.direct[..., channels]
+            cap = recorder.capture(f"{name}-direct-{label}-{i:02d}", shown, meta={"kind": "direct"})
+            light = (cap - base)[..., channels]
+            plus += np.where(lit_full[i][:, :, None], light, 0)
+            minus += np.where(unlit_full[i][:, :, None], light, 0)
+        n_plus = lit_full.sum(axis=0)[:, :, None]
+        n_minus = unlit_full.sum(axis=0)[:, :, None]
+        ok = (n_plus > 0) & (n_minus > 0)
+        d = np.where(ok, plus / np.maximum(n_plus, 1) - minus / np.maximum(n_minus, 1), 0)
+        direct[..., channels] = np.where(painted_valid[:, :, None], d, 0)
     med = np.median(direct[painted_valid], axis=0)
     usable = painted_valid & (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
     if not usable.any():
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
-    return PreparedTarget(usable, target & ~usable, direct)
+    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()))
+
+
+def _neighbourhood_states(patterns, corr: Correspondence, mask: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pattern and camera pixel: was the pixel's 3×3 projector neighbourhood all lit / all unlit?
+
+    Neighbours outside the target's footprint are never lit; they do not prevent "all lit"
+    (otherwise the target's edge pixels would never count as lit).
+    """
+    import cv2
+
+    kernel = np.ones((3, 3), np.uint8)
+    ys, xs = np.nonzero(mask)
+    px, py = corr.x[ys, xs], corr.y[ys, xs]
+    lit = np.zeros((len(patterns),) + mask.shape, bool)
+    unlit = np.zeros_like(lit)
+    for i, pattern in enumerate(patterns):
+        on = (pattern[..., 0] > 0.5).astype(np.uint8)
+        lit[i, ys, xs] = cv2.erode(on | ~footprint, kernel, borderType=cv2.BORDER_REPLICATE)[py, px] > 0
+        unlit[i, ys, xs] = cv2.dilate(on, kernel, borderType=cv2.BORDER_REPLICATE)[py, px] == 0
+    return lit, unlit
 
 
 def pattern_budget(per_channel: bool, *, shifts: int = 2) -> int:

@@ -26,6 +26,7 @@ from engine.calibrate.graycode import (
     Correspondence,
     PixelStatus,
     decode_gray_code,
+    fill_correspondence,
     gray_code_bits,
     gray_code_patterns,
 )

@@ -33,6 +33,13 @@ __all__ = [
 #: Float thresholds are fractions of the captures' full scale (see :func:`decode_gray_code`).
 FLOAT_THRESHOLD = 0.02
 FLOAT_SHADOW_THRESHOLD = 0.02
+#: Float captures with white/black: a bit is trusted when its pair differs by this fraction of
+#: the pixel's largest pair difference (its direct projector light: grazing or far surfaces
+#: get little of it but decode as well as any other, and global light does not count), and
+#: pixels are lit above these fractions of full scale.
+FLOAT_RELATIVE_THRESHOLD = 0.1
+FLOAT_FLOOR = 0.002
+FLOAT_SHADOW_FLOOR = 0.005
 #: OpenCV's defaults for 8-bit captures (whiteThreshold, blackThreshold).
 UINT8_THRESHOLD = 5
 UINT8_SHADOW_THRESHOLD = 40
@@ -299,9 +306,14 @@ def decode_gray_code(
         given, pixels with ``white − black ≤ shadow_threshold`` are UNLIT.
     threshold : float, optional
         A bit is trusted when ``|pattern − inverse| ≥ threshold`` (OpenCV's whiteThreshold),
-        in image units. Default: 5 for uint8 (OpenCV's default), 5·257 for uint16, and for
-        float ``0.02 ×`` full scale (the 99.9th percentile of the white capture, or of the
-        brighter of the first pattern pair).
+        in image units. Float captures with white and black, by default: per pixel,
+        ``max(0.002 × full scale, 0.1 × the pixel's largest pair difference)`` — contrast is
+        judged against the pixel's own direct projector light, so dim grazing surfaces decode
+        and global light does not count; unlit below
+        ``0.005 ×`` full scale. Otherwise: 5 for uint8 (OpenCV's default), 5·257 for uint16, and for
+        float ``0.02 ×`` the projector's full scale: the 99.9th percentile of ``white − black``
+        (or of the first pattern pair's difference), so that a lamp or a bright ambient-lit
+        area in view does not set the scale.
     shadow_threshold : float, optional
         Default: 40 for uint8 (OpenCV's blackThreshold), 40·257 for uint16, ``0.02 ×`` full
         scale for float (40/255 of a gamma-encoded 8-bit image is ~2 % in linear light).
@@ -380,9 +392,12 @@ def decode_gray_code(
     elif kind == np.uint16:
         scale, t_def, s_def = 257.0, UINT8_THRESHOLD, UINT8_SHADOW_THRESHOLD
     else:
-        ref = wb[0] if wb is not None else np.maximum(grey[0], grey[1])
+        # the projector's own contribution: a lamp in view must not set the scale
+        ref = (wb[0] - wb[1]) if wb is not None else np.abs(grey[0] - grey[1])
         scale = float(np.percentile(ref, 99.9)) if ref.size else 0.0
         t_def, s_def = FLOAT_THRESHOLD, FLOAT_SHADOW_THRESHOLD
+        if wb is not None:
+            t_def, s_def = FLOAT_FLOOR, FLOAT_SHADOW_FLOOR
     thr = t_def * scale if threshold is None else float(threshold)
     sthr = s_def * scale if shadow_threshold is None else float(shadow_threshold)
     if not np.isfinite(thr) or thr < 0:
@@ -390,6 +405,11 @@ def decode_gray_code(
     if not np.isfinite(sthr):
         raise InputError(f"shadow_threshold must be a finite number in image units, got {shadow_threshold!r}")
 
+    if threshold is None and kind.kind == "f" and wb is not None:
+        best = np.zeros(shape, grey[0].dtype)
+        for k in range(npat // 2):
+            np.maximum(best, np.abs(grey[2 * k] - grey[2 * k + 1]), out=best)
+        thr = np.maximum(thr, FLOAT_RELATIVE_THRESHOLD * best).astype(grey[0].dtype)
     ok = np.ones(shape, np.bool_)
     bit = np.empty(shape, np.bool_)
     binary = np.empty(shape, np.bool_)
@@ -423,8 +443,8 @@ def decode_gray_code(
     return Correspondence._trusted(x, y, status, (hp, wp))
 
 
-def _pair(pos: np.ndarray, neg: np.ndarray, thr: float, bit: np.ndarray, ok: np.ndarray) -> None:
-    """bit ← pos > neg; ok &= |pos − neg| ≥ thr (in place; exact for integer captures)."""
+def _pair(pos: np.ndarray, neg: np.ndarray, thr, bit: np.ndarray, ok: np.ndarray) -> None:
+    """bit ← pos > neg; ok &= |pos − neg| ≥ thr, thr a scalar or per pixel (in place; exact for integer captures)."""
     if pos.dtype.kind in "ui" and pos.dtype.itemsize == 1:
         diff = np.subtract(pos, neg, dtype=np.int16)
     elif pos.dtype == np.float64 or (pos.dtype.kind in "ui" and pos.dtype.itemsize > 2):
@@ -434,3 +454,81 @@ def _pair(pos: np.ndarray, neg: np.ndarray, thr: float, bit: np.ndarray, ok: np.
     np.greater(diff, 0, out=bit)
     np.abs(diff, out=diff)
     ok &= diff >= thr
+
+
+def fill_correspondence(correspondence: Correspondence, target, *, radius: int = 4) -> tuple[Correspondence, np.ndarray]:
+    """Fill undecoded target pixels from a local plane fit of their decoded neighbours.
+
+    Gray code fails where interreflections cancel a bit's contrast (concave corners) or at
+    grazing angles, yet on a smooth surface the projector position is a smooth function of
+    the camera position. Each undecoded target pixel with at least six decoded target pixels
+    within ``radius`` gets the rounded value, at its position, of the least-squares plane
+    ``x = a + b u + c v`` (and the same for ``y``) through them.
+
+    Parameters
+    ----------
+    correspondence : Correspondence
+    target : (H, W) bool
+        Only pixels of the target are filled, only from pixels of the target (one surface).
+    radius : int
+        Half-size of the square neighbourhood, in camera pixels.
+
+    Returns
+    -------
+    filled : Correspondence
+        Filled pixels are marked DECODED.
+    mask : (H, W) bool
+        The pixels that were filled.
+
+    Examples
+    --------
+    >>> c = Correspondence.identity((5, 5))
+    >>> status = c.status.copy()
+    >>> status[2, 2] = PixelStatus.LOW_CONTRAST
+    >>> hole = Correspondence(c.x, c.y, status, (5, 5))
+    >>> f, m = fill_correspondence(hole, np.ones((5, 5), bool))
+    >>> int(f.x[2, 2]), int(f.y[2, 2]), int(m.sum())
+    (2, 2, 1)
+    """
+    import cv2
+
+    target = np.asarray(target, bool)
+    if target.shape != correspondence.camera_resolution:
+        raise InputError(f"target must have shape {correspondence.camera_resolution}, got {target.shape}")
+    good = correspondence.valid & target
+    holes = target & ~correspondence.valid
+    if not holes.any() or not good.any():
+        return correspondence, np.zeros_like(holes)
+    h, w = target.shape
+    v, u = np.indices((h, w), dtype=np.float64)
+    wgt = good.astype(np.float64)
+    k = (2 * radius + 1, 2 * radius + 1)
+
+    def box(a):
+        return cv2.boxFilter(a, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+
+    # normal equations of the local plane fit, centred on each pixel for conditioning
+    s1, su, sv = box(wgt), box(wgt * u), box(wgt * v)
+    suu, suv, svv = box(wgt * u * u), box(wgt * u * v), box(wgt * v * v)
+    ata = np.stack([np.stack([s1, su, sv], -1), np.stack([su, suu, suv], -1), np.stack([sv, suv, svv], -1)], -2)
+    out_x, out_y = correspondence.x.copy(), correspondence.y.copy()
+    status = correspondence.status.copy()
+    hy, hx = np.nonzero(holes & (s1 >= 6))
+    if hy.size:
+        a = ata[hy, hx]
+        det_ok = np.abs(np.linalg.det(a)) > 1e-9 * np.maximum(s1[hy, hx], 1) ** 3
+        pos = np.stack([np.ones(hy.size), hx.astype(float), hy.astype(float)], -1)
+        for src, dst in ((correspondence.x, out_x), (correspondence.y, out_y)):
+            val = np.where(good, src, 0).astype(np.float64)
+            rhs = np.stack([box(wgt * val), box(wgt * val * u), box(wgt * val * v)], -1)[hy, hx]
+            coef = np.linalg.solve(np.where(det_ok[:, None, None], a, np.eye(3)), rhs[..., None])[..., 0]
+            dst[hy[det_ok], hx[det_ok]] = np.rint((coef * pos).sum(-1))[det_ok].astype(np.int32)
+        hp, wp = correspondence.projector_resolution
+        keep = det_ok & (out_x[hy, hx] >= 0) & (out_x[hy, hx] < wp) & (out_y[hy, hx] >= 0) & (out_y[hy, hx] < hp)
+        status[hy[keep], hx[keep]] = PixelStatus.DECODED
+        hy, hx = hy[keep], hx[keep]
+    filled = np.zeros_like(holes)
+    filled[hy, hx] = True
+    out_x[~(status == PixelStatus.DECODED)] = -1
+    out_y[~(status == PixelStatus.DECODED)] = -1
+    return Correspondence(out_x, out_y, status, correspondence.projector_resolution), filled
