@@ -9,11 +9,11 @@ the arrays every capture reuses:
   coordinates and an area.
 * **patches** — each quad cut into a grid of cells about ``patch_size`` wide. The patch
   radiance is the area-weighted mean of its samples' radiance: ``B = Mavg L``.
-* **form factors** — ``Gn[m, j]``: from the centre of patch ``m`` to patch ``j``, Lambert's
-  exact polygon form factor (clipped to the receiver's hemisphere) times the kernel-weighted
-  fraction of shadow rays to ``vis_samples**2`` points of ``j`` that are unblocked; a sample's
-  form factors are the bilinear interpolation ``W`` of its quad's patch-centre values, so
-  ``G = W Gn`` is never stored densely.
+* **form factors** — ``Gn[m, j]``: from node ``m`` (a vertex of the patch grid) to patch
+  ``j``, Lambert's exact polygon form factor (clipped to the receiver's hemisphere) times the
+  kernel-weighted fraction of ``VIS_SAMPLES**2`` shadow rays to points of ``j`` that are
+  unblocked; a sample's form factors are the bilinear interpolation ``W`` of the four nodes
+  around it, so ``G = W Gn`` is never stored densely.
 * **ambient light** — the form factor of every sample to every emitting quad, with the same
   polygon formula and ``light_samples**2`` shadow rays (soft shadows at pixel resolution).
 * **projector** — for every sample, the projector pixel nearest to its projection (each
@@ -46,13 +46,16 @@ from devices.virtual.geometry import (Quads, View, blocker_table, cast_rays, occ
 from devices.virtual.scene import Scene
 from engine.progress import report
 
-MODEL_VERSION = 4
+MODEL_VERSION = 8
 
 # Shadow rays per edge of a patch (form factors) and of a light (ambient light).
 VIS_SAMPLES = 3
 LIGHT_SAMPLES = 4
 # Hidden samples per edge of a patch.
 HIDDEN_PER_PATCH = 3
+# Form-factor nodes, and samples when their light is computed, on a quad's border are moved
+# this far inside (local coordinates), away from edges shared with other quads.
+NODE_INSET = 1e-3
 
 
 @dataclass(frozen=True)
@@ -87,12 +90,15 @@ class Setup:
         Quad of each patch.
     patch_area : (P,) float64
         Geometric area of each patch.
+    patch_nu, patch_nv : (Q,) int64
+        Patch grid of every quad (patch ``(i, j)`` of quad ``q`` is
+        ``sum(nu * nv before q) + i * nv[q] + j``).
     mavg : (P, Ns) scipy.sparse.csr_matrix
         Area-weighted averaging: ``B = mavg @ L``.
-    interp : (Ns, P) scipy.sparse.csr_matrix
-        Bilinear interpolation of patch-centre form factors to samples (rows sum to 1).
-    gn : (P, P) float64
-        Form factors from patch centres to patches (rows sum to at most 1).
+    interp : (Ns, Nn) scipy.sparse.csr_matrix
+        Bilinear interpolation of node form factors to samples (rows sum to 1).
+    gn : (Nn, P) float64
+        Form factors from the nodes (patch-grid vertices) to patches (rows sum to at most 1).
     light_quads : (Lq,) int64
         Emitting quads.
     light_ff : (Ns, Lq) float64
@@ -122,6 +128,8 @@ class Setup:
     patch: np.ndarray
     patch_quad: np.ndarray
     patch_area: np.ndarray
+    patch_nu: np.ndarray
+    patch_nv: np.ndarray
     mavg: sp.csr_matrix
     interp: sp.csr_matrix
     gn: np.ndarray
@@ -238,6 +246,49 @@ def _load_arrays(path: Path, names) -> dict | None:
         return None
 
 
+def patch_to_patch(scene: Scene, setup: Setup, *, per_edge: int = 4) -> np.ndarray:
+    """Patch-to-patch form factors ``F[i, j]`` of the model's point-to-patch form factors.
+
+    ``F[i, j]`` is the mean, over a ``per_edge x per_edge`` grid of points on patch ``i``, of
+    the interpolated form factor to patch ``j`` (the ``G`` every sample uses). With exact
+    form factors ``A_i F_ij = A_j F_ji`` (reciprocity) and rows sum to at most 1.
+
+    Parameters
+    ----------
+    scene : Scene
+    setup : Setup
+        Built for ``scene``.
+    per_edge : int
+        Integration points per patch edge.
+
+    Returns
+    -------
+    (P, P) float64
+    """
+    quads = scene.quads
+    nu, nv, offset = _grid_of(setup, len(quads))
+    qs, aa, bb, pp = [], [], [], []
+    for q in range(len(quads)):
+        gu, gv = nu[q] * per_edge, nv[q] * per_edge
+        a, b = np.meshgrid((np.arange(gu) + 0.5) / gu, (np.arange(gv) + 0.5) / gv, indexing="ij")
+        qs.append(np.full(a.size, q))
+        aa.append(a.ravel())
+        bb.append(b.ravel())
+        pp.append((offset[q] + (np.arange(gu) // per_edge)[:, None] * nv[q] + (np.arange(gv) // per_edge)[None, :]).ravel())
+    qs, aa, bb, pp = map(np.concatenate, (qs, aa, bb, pp))
+    node_offset = np.concatenate([[0], np.cumsum((nu + 1) * (nv + 1))])
+    w = _interpolation(aa, bb, qs, np.ones(len(qs), bool), nu, nv, node_offset, setup.gn.shape[0])
+    n_p = len(setup.patch_area)
+    avg = sp.csr_matrix((np.full(len(pp), 1.0 / per_edge**2), (pp, np.arange(len(pp)))), shape=(n_p, len(pp)))
+    return np.asarray(avg @ (w @ setup.gn))
+
+
+def _grid_of(setup: Setup, n_quads: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Patch counts (nu, nv) and offsets of every quad, read back from a set-up."""
+    return (setup.patch_nu.astype(np.int64), setup.patch_nv.astype(np.int64),
+            np.concatenate([[0], np.cumsum(setup.patch_nu * setup.patch_nv)]).astype(np.int64))
+
+
 def _save(path: Path, setup: Setup) -> None:
     arrays = {}
     for f in fields(Setup):
@@ -324,6 +375,11 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     hq, ha, hb, harea = map(np.concatenate, (hq, ha, hb, harea))
     hpoints = quads.point(hq, ha, hb)
     seen = _seen_by(camera, pixel_quad, hpoints, hq, normal)
+    seen_pixel, _ = camera.nearest_pixel(hpoints[seen])
+    seen_patch = offset[hq[seen]] + (np.minimum((ha[seen] * nu[hq[seen]]).astype(np.int64), nu[hq[seen]] - 1)
+                                     * nv[hq[seen]] + np.minimum((hb[seen] * nv[hq[seen]]).astype(np.int64),
+                                                                 nv[hq[seen]] - 1))
+    seen_area = harea[seen]
     keep = ~seen
     hq, ha, hb, harea, hpoints = hq[keep], ha[keep], hb[keep], harea[keep], hpoints[keep]
 
@@ -344,18 +400,26 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     patch_quad = np.repeat(np.arange(len(quads)), nu * nv)
     patch_area = quads.area[patch_quad] / (nu * nv)[patch_quad]
     rows = np.flatnonzero(live)
-    wsum = np.bincount(patch[rows], weights=area[rows], minlength=n_patches)
-    mavg = sp.csr_matrix((area[rows] / wsum[patch[rows]], (patch[rows], rows)), shape=(n_patches, n_samples))
-    interp = _interpolation(a, b, qs, live, nu, nv, offset, n_patches)
+    cols_patch, weights = patch[rows], area[rows]
+    # a patch seen by the camera but too thin to contain a pixel's sample takes the radiance
+    # of the pixels that see it (their samples lie on the same quad, just beside it)
+    empty = np.bincount(cols_patch, minlength=n_patches) == 0
+    extra = empty[seen_patch]
+    rows = np.concatenate([rows, seen_pixel[extra]])
+    cols_patch = np.concatenate([cols_patch, seen_patch[extra]])
+    weights = np.concatenate([weights, seen_area[extra]])
+    wsum = np.bincount(cols_patch, weights=weights, minlength=n_patches)
+    mavg = sp.csr_matrix((weights / wsum[cols_patch], (cols_patch, rows)), shape=(n_patches, n_samples))
+    nodes, node_quad, node_offset = _node_grid(quads, nu, nv)
+    interp = _interpolation(a, b, qs, live, nu, nv, node_offset, len(nodes))
 
     report(progress, 1, steps, "form factors between patches")
-    centres = _patch_centres(quads, nu, nv)
-    if form_factors is not None and form_factors[0].shape == (n_patches, n_patches):
+    if form_factors is not None and form_factors[0].shape == (len(nodes), n_patches):
         gn, rescaled = form_factors
     else:
-        gn = _patch_form_factors(quads, centres, patch_quad, nu, nv, offset)
+        gn = _patch_form_factors(quads, nodes, node_quad, patch_quad, nu, nv)
         sums = gn.sum(axis=1)
-        over = sums > 1.0
+        over = sums > 1.0 + 1e-9
         gn[over] /= sums[over, None]
         rescaled = int(over.sum())
 
@@ -364,7 +428,11 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     light_ff = np.zeros((n_samples, len(light_quads)))
     for k, lq in enumerate(light_quads):
         sel = np.flatnonzero(live & (quad != lq))
-        light_ff[sel, k] = _form_factor_to_quad(points[sel], normal[quad[sel]], quad[sel], quads, lq, LIGHT_SAMPLES)
+        # evaluate a hair inside the sample's quad: a point exactly on an edge shared with the
+        # light would make the polygon formula singular
+        inner = quads.point(quad[sel], np.clip(a[sel], NODE_INSET, 1 - NODE_INSET),
+                            np.clip(b[sel], NODE_INSET, 1 - NODE_INSET))
+        light_ff[sel, k] = _form_factor_to_quad(inner, normal[quad[sel]], quad[sel], quads, lq, LIGHT_SAMPLES)
 
     report(progress, 3, steps, "projector")
     pdirs = projector.pixel_directions()
@@ -393,7 +461,7 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
 
     report(progress, steps, steps, "set-up done")
     return Setup(quad=quad, a=a, b=b, points=points, area=area, patch=patch,
-                 patch_quad=patch_quad, patch_area=patch_area, mavg=mavg, interp=interp, gn=gn,
+                 patch_quad=patch_quad, patch_area=patch_area, patch_nu=nu, patch_nv=nv, mavg=mavg, interp=interp, gn=gn,
                  light_quads=light_quads, light_ff=light_ff, proj_index=proj_index, proj_lit=lit,
                  proj_factor=proj_factor, proj_xy=proj_xy, pixel_quad=pixel_quad,
                  resolution=np.array(geometry.resolution), projector_resolution=np.array(geometry.projector_resolution),
@@ -413,39 +481,50 @@ def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.nd
     return inside & facing & (quad >= 0) & (pixel_quad[idx] == quad)
 
 
-def _interpolation(a, b, q, live, nu, nv, offset, n_patches) -> sp.csr_matrix:
-    """Bilinear weights from patch centres of each sample's quad (clamped at the borders)."""
+def _node_grid(quads: Quads, nu, nv) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Form-factor nodes at the patch-grid vertices of every quad.
+
+    Returns
+    -------
+    points : (Nn, 3)
+        Node positions, moved inside their quad by ``NODE_INSET`` (local units) so that no
+        node lies on an edge shared with another quad (where the polygon formula is singular).
+    node_quad : (Nn,) int64
+    node_offset : (Q + 1,) int64
+        First node of each quad; node ``(i, j)`` of quad ``q`` is ``node_offset[q] + i * (nv + 1) + j``.
+    """
+    qs, aa, bb = [], [], []
+    for q in range(len(quads)):
+        a, b = np.meshgrid(np.arange(nu[q] + 1) / nu[q], np.arange(nv[q] + 1) / nv[q], indexing="ij")
+        qs.append(np.full(a.size, q))
+        aa.append(np.clip(a.ravel(), NODE_INSET, 1 - NODE_INSET))
+        bb.append(np.clip(b.ravel(), NODE_INSET, 1 - NODE_INSET))
+    qs, aa, bb = map(np.concatenate, (qs, aa, bb))
+    offset = np.concatenate([[0], np.cumsum((nu + 1) * (nv + 1))])
+    return quads.point(qs, aa, bb), qs, offset
+
+
+def _interpolation(a, b, q, live, nu, nv, node_offset, n_nodes) -> sp.csr_matrix:
+    """Bilinear weights from the four nodes around each sample (rows sum to 1, 0 if inert)."""
     cols, vals = [], []
     parts = []
     for coord, n in ((a, nu[q]), (b, nv[q])):
-        f = np.clip(coord * n - 0.5, 0.0, n - 1.0)
-        i0 = np.minimum(np.floor(f).astype(np.int64), np.maximum(n - 2, 0))
-        frac = f - i0
-        i1 = np.minimum(i0 + 1, n - 1)
-        parts.append((i0, i1, frac))
-    (u0, u1, fu), (v0, v1, fv) = parts
-    base = offset[q]
-    nvq = nv[q]
-    for ui, wu in ((u0, 1 - fu), (u1, fu)):
-        for vi, wv in ((v0, 1 - fv), (v1, fv)):
-            cols.append(base + ui * nvq + vi)
+        f = np.clip(coord, 0.0, 1.0) * n
+        i0 = np.minimum(np.floor(f).astype(np.int64), n - 1)
+        parts.append((i0, f - i0))
+    (u0, fu), (v0, fv) = parts
+    base = node_offset[q]
+    stride = nv[q] + 1
+    for ui, wu in ((u0, 1 - fu), (u0 + 1, fu)):
+        for vi, wv in ((v0, 1 - fv), (v0 + 1, fv)):
+            cols.append(base + ui * stride + vi)
             vals.append(wu * wv)
     rows = np.tile(np.arange(len(a)), 4)
     vals = np.concatenate(vals) * np.tile(live, 4)
-    m = sp.coo_matrix((vals, (rows, np.concatenate(cols))), shape=(len(a), n_patches)).tocsr()
+    cols = np.where(np.tile(live, 4), np.concatenate(cols), 0)
+    m = sp.coo_matrix((vals, (rows, cols)), shape=(len(a), n_nodes)).tocsr()
     m.eliminate_zeros()
     return m
-
-
-def _patch_centres(quads: Quads, nu, nv) -> np.ndarray:
-    qs, aa, bb = [], [], []
-    for q in range(len(quads)):
-        a, b = np.meshgrid((np.arange(nu[q]) + 0.5) / nu[q], (np.arange(nv[q]) + 0.5) / nv[q], indexing="ij")
-        qs.append(np.full(a.size, q))
-        aa.append(a.ravel())
-        bb.append(b.ravel())
-    qs, aa, bb = map(np.concatenate, (qs, aa, bb))
-    return quads.point(qs, aa, bb)
 
 
 def _patch_corners(quads: Quads, nu, nv) -> np.ndarray:
@@ -488,28 +567,28 @@ def _visibility(x: np.ndarray, nx: np.ndarray, sub: np.ndarray, ne: np.ndarray, 
     return vis
 
 
-def _patch_form_factors(quads: Quads, centres, patch_quad, nu, nv, offset) -> np.ndarray:
-    """Gn[m, j]: polygon form factor from the centre of patch m to patch j, with visibility."""
+def _patch_form_factors(quads: Quads, nodes, node_quad, patch_quad, nu, nv) -> np.ndarray:
+    """Gn[m, j]: polygon form factor from node m to patch j, times its visibility fraction."""
     normal = quads.normal
     corners = _patch_corners(quads, nu, nv)
+    centres = corners.mean(axis=1)
     subs = _sub_points(corners, VIS_SAMPLES)
     blockers = blocker_table(quads)
-    n_p = len(centres)
-    gn = np.zeros((n_p, n_p))
+    n_n, n_p = len(nodes), len(corners)
+    gn = np.zeros((n_n, n_p))
     step = max(1, (1 << 16) // max(n_p, 1))
     cols = np.arange(n_p)
-    for lo in range(0, n_p, step):
-        rows = np.arange(lo, min(lo + step, n_p))
+    for lo in range(0, n_n, step):
+        rows = np.arange(lo, min(lo + step, n_n))
         r, c = np.repeat(rows, n_p), np.tile(cols, len(rows))
-        keep = patch_quad[r] != patch_quad[c]
-        facing = np.einsum("ij,ij->i", centres[r] - centres[c], normal[patch_quad[c]]) > 0
-        keep &= facing
+        keep = node_quad[r] != patch_quad[c]
+        keep &= np.einsum("ij,ij->i", nodes[r] - centres[c], normal[patch_quad[c]]) > 0
         r, c = r[keep], c[keep]
-        f = polygon_form_factor(centres[r], normal[patch_quad[r]], corners[c])
+        f = polygon_form_factor(nodes[r], normal[node_quad[r]], corners[c])
         pos = f > 0
         r, c, f = r[pos], c[pos], f[pos]
-        vis = _visibility(centres[r], normal[patch_quad[r]], subs[c], normal[patch_quad[c]], quads,
-                          patch_quad[r] * len(quads) + patch_quad[c], blockers)
+        vis = _visibility(nodes[r], normal[node_quad[r]], subs[c], normal[patch_quad[c]], quads,
+                          node_quad[r] * len(quads) + patch_quad[c], blockers)
         gn[r, c] = f * vis
     return gn
 

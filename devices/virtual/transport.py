@@ -49,7 +49,7 @@ class Resolvent:
     def __init__(self, setup: Setup, rho: np.ndarray):
         self.setup = setup
         self.rho = np.asarray(rho, np.float64)
-        n_p = setup.gn.shape[0]
+        n_p = setup.mavg.shape[0]
         eye = np.eye(n_p)
         self._lu = []
         for c in range(self.rho.shape[1]):
