@@ -63,12 +63,14 @@ def run_capture(
     settings: CaptureSettings = CaptureSettings(),
     adaptive: Adaptive | None = None,
     photograph_pattern: np.ndarray | None = None,
+    frames: int = 1,
     progress: Progress | None = None,
     should_stop: ShouldStop | None = None,
     on_capture=None,
 ) -> CascadeResult:
     """Capture a cascade (or one target) into ``session`` and cache its decomposition.
 
+    ``frames`` captures are averaged per pattern (noise ∝ 1/sqrt(frames)).
     The plan (targets in order, order, fixed κ, settings) is written to the session's state
     before the first capture, masks to ``masks/``; re-running with the same session resumes.
     The last target's decomposition is cached under ``cache/``.
@@ -95,7 +97,7 @@ def run_capture(
             "use a new session folder for a new plan"
         )
     session.update(plan=plan, status="capturing")
-    recorder = Recorder(rig, session, progress=progress, should_stop=should_stop, on_capture=on_capture)
+    recorder = Recorder(rig, session, progress=progress, should_stop=should_stop, on_capture=on_capture, frames=frames)
     result = acquire_cascade(
         recorder,
         calibration,

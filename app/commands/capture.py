@@ -29,6 +29,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute",
                         help="predict captures instead of taking them (Sec. 5); default %(default)s")
     parser.add_argument("--threshold", type=float, default=0.01, help="adaptive relative-error threshold (default 1%%)")
+    parser.add_argument("--frames", type=int, default=1, help="frames averaged per capture (default %(default)s)")
     parser.add_argument("--rgb", action="store_true", help="emit all channels at once instead of one primary at a time")
     parser.add_argument("--flood", type=float, default=None, metavar="LEVEL",
                         help="light the photograph with a projector flood of this level instead of black")
@@ -63,6 +64,7 @@ def run(args) -> int:
             settings=CaptureSettings(per_channel=not args.rgb),
             adaptive=None if args.adaptive == "brute" else Adaptive(args.adaptive, args.threshold),
             photograph_pattern=flood,
+            frames=args.frames,
             progress=ProgressBar(),
         )
     print(

@@ -46,7 +46,7 @@ def write_edit(path: Path, image, *, plan: dict, kappa_value, half: bool = False
     edit = {"targets": plan.get("targets"), "fixed_kappa": plan.get("fixed_kappa"), "kappa": list(map(float, kappa_value)), "order": plan.get("order")}
     suffix = path.suffix.lower()
     dtype = "half" if (half and suffix == ".exr") else ("uint8" if suffix == ".png" else "float")
-    write_image(path, image if dtype != "uint8" else _display(image), dtype=dtype, metadata={"albedit:edit": edit})
+    write_image(path, image if dtype != "uint8" else _display(image), dtype=dtype, metadata={"albedit.edit": edit})
 
 
 def _display(image):
