@@ -85,10 +85,14 @@ class Rig:
         Named target masks the rig knows (the virtual rig's scene targets).
     truth : object, optional
         Ground truth (virtual rig only).
+    identity : str, optional
+        The physical rig this one stands for, which calibrations are checked against
+        (default: ``name``; a ``replay:`` rig stands for the rig it recorded).
     """
 
-    def __init__(self, name: str, camera: Camera, projector: Projector, *, targets=None, truth=None):
+    def __init__(self, name: str, camera: Camera, projector: Projector, *, targets=None, truth=None, identity=None):
         self.name = name
+        self.identity = identity or name
         self.camera = camera
         self.projector = projector
         self.targets: dict[str, np.ndarray] = dict(targets or {})

@@ -26,7 +26,7 @@ def open_or_create(path: Path, rig) -> Session:
         return session
     return Session.create(
         path,
-        rig_name=rig.name,
+        rig_name=rig.identity,
         camera_resolution=tuple(rig.camera.resolution),
         projector_resolution=tuple(rig.projector.resolution),
         metadata={"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8))},

@@ -67,7 +67,7 @@ def run(args) -> int:
             session.recover_orphans()
         else:
             session = Session.create(
-                session_path, rig_name=rig.name, camera_resolution=tuple(rig.camera.resolution),
+                session_path, rig_name=rig.identity, camera_resolution=tuple(rig.camera.resolution),
                 projector_resolution=tuple(rig.projector.resolution), metadata={"demo": True},
             )
         print(f"calibrating {rig.name} ...", file=sys.stderr)

@@ -202,7 +202,8 @@ def acquire_cascade(
     if (total > 1).any():
         raise InputError("targets overlap: a pixel may belong to one target only")
     rig = recorder.rig
-    calibration.check_compatible(getattr(rig, "name", calibration.rig_name), tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+    identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
+    calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
     adaptive = adaptive or Adaptive(Policy.BRUTE)
     t_count = len(targets)
     d_cost = 0 if prepared is not None else t_count * pattern_budget(settings.per_channel)
