@@ -44,10 +44,10 @@ class Renderer:
         pq = setup.pixel_quad
         self.emission = np.where((pq >= 0)[:, None], scene.emission[np.maximum(pq, 0)], 0.0)
         self.ambient = True
-        self._lit = np.flatnonzero(setup.proj_lit)
-        self._lit_pixel = setup.proj_index[self._lit]
-        self._lit_gain = setup.proj_factor[self._lit, None] * scene.projector_power[None, :]
-        self._cache32 = (self.ambient_light.astype(np.float32), self._lit_gain.astype(np.float32),
+        # every sample gathers from one projector pixel (pixel 0 with gain 0 where unlit)
+        self._proj_index = np.where(setup.proj_lit, setup.proj_index, 0).astype(np.intp)
+        self._proj_gain = np.where(setup.proj_lit, setup.proj_factor, 0.0)[:, None] * scene.projector_power[None, :]
+        self._cache32 = (self.ambient_light.astype(np.float32), self._proj_gain.astype(np.float32),
                          self.emission.astype(np.float32))
 
     @property
@@ -71,11 +71,14 @@ class Renderer:
         (Ns, 3) ``dtype``
         """
         f32 = np.dtype(dtype) == np.float32
-        amb, gain = (self._cache32[0], self._cache32[1]) if f32 else (self.ambient_light, self._lit_gain)
-        e = amb.copy() if ambient else np.zeros(amb.shape, amb.dtype)
-        if emitted is not None:
-            flat = np.asarray(emitted).reshape(-1, 3)
-            e[self._lit] += flat[self._lit_pixel].astype(e.dtype) * gain
+        amb, gain = (self._cache32[0], self._cache32[1]) if f32 else (self.ambient_light, self._proj_gain)
+        if emitted is None:
+            return amb.copy() if ambient else np.zeros(amb.shape, amb.dtype)
+        flat = np.asarray(emitted).reshape(-1, 3)
+        e = np.take(flat, self._proj_index, axis=0).astype(amb.dtype, copy=False)
+        e *= gain
+        if ambient:
+            e += amb
         return e
 
     def to_image(self, radiance: np.ndarray, *, ambient: bool) -> np.ndarray:

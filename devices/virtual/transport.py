@@ -57,10 +57,12 @@ class Resolvent:
             self._lu.append(sla.lu_factor(eye - a @ setup.gn, check_finite=False))
         self._rho32 = self.rho.astype(np.float32)
         self._interp32 = setup.interp.astype(np.float32)
+        self._mavg32 = setup.mavg.astype(np.float32)
 
     def patch_radiance(self, x: np.ndarray) -> np.ndarray:
         """Patch radiance ``b = Mavg y`` of the solution ``y`` for source ``x`` (Ns, C)."""
-        rhs = np.asarray(self.setup.mavg @ x, np.float64)
+        mavg = self._mavg32 if x.dtype == np.float32 else self.setup.mavg
+        rhs = np.asarray(mavg @ x, np.float64)
         return np.stack([sla.lu_solve(self._lu[c], rhs[:, c], check_finite=False)
                          for c in range(rhs.shape[1])], axis=1)
 
@@ -77,10 +79,12 @@ class Resolvent:
         """
         b = self.setup.gn @ self.patch_radiance(x)
         if x.dtype == np.float32:
-            indirect, rho = self._interp32 @ b.astype(np.float32), self._rho32
+            out, rho = self._interp32 @ b.astype(np.float32), self._rho32
         else:
-            indirect, rho = self.setup.interp @ b, self.rho
-        return x + rho * indirect
+            out, rho = self.setup.interp @ b, self.rho
+        out *= rho
+        out += x
+        return out
 
     def solve(self, e: np.ndarray) -> np.ndarray:
         """Reflected radiance ``L = rho (E + G Mavg L)`` for direct light ``E`` (Ns, 3)."""
