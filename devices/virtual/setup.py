@@ -34,6 +34,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -198,8 +199,9 @@ def load_or_build(scene: Scene, geometry: Geometry, cache_dir: Path | None, *, p
     ff_key = _key(common)
     key = _key(dict(common, resolution=list(geometry.resolution), projector=geometry.projector,
                     projector_resolution=list(geometry.projector_resolution)))
-    path = Path(cache_dir) / f"{scene.name}-{key}.npz"
-    ff_path = Path(cache_dir) / f"{scene.name}-ff-{ff_key}.npz"
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", scene.name)[:64]  # never a path outside cache_dir
+    path = Path(cache_dir) / f"{stem}-{key}.npz"
+    ff_path = Path(cache_dir) / f"{stem}-ff-{ff_key}.npz"
     cached = _load(path)
     if cached is not None:
         return cached

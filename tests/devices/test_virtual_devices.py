@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,7 @@ from devices.base import Frame
 from devices.virtual import open_rig
 from devices.virtual.camera import CameraModel
 from devices.virtual.projector import ProjectorModel
+from devices.virtual.scene import SCENE_DIR
 from engine.errors import InputError
 
 
@@ -310,3 +313,13 @@ def test_no_cache_writes_nothing(tmp_path, monkeypatch):
     assert not (tmp_path / "xdg").exists()
     open_rig("wedge", ideal=True, resolution=(16, 16), patch_size=0.3)
     assert list((tmp_path / "xdg" / "albedit" / "virtual").glob("*.npz"))
+
+
+def test_cache_files_stay_inside_the_cache_dir(tmp_path):
+    data = json.loads((SCENE_DIR / "wedge.json").read_text())
+    data["name"] = "../../escape"
+    scene = tmp_path / "scene.json"
+    scene.write_text(json.dumps(data))
+    open_rig(str(scene), resolution=(8, 8), cache_dir=tmp_path / "cache", patch_size=0.4)
+    written = [p for p in tmp_path.rglob("*.npz")]
+    assert len(written) == 2 and all(p.parent == tmp_path / "cache" for p in written)
