@@ -17,7 +17,7 @@ _EPS = 1e-7
 _CHUNK = 1 << 18
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Quads:
     """A set of ``Q`` planar parallelograms.
 
@@ -57,7 +57,7 @@ class Quads:
         return len(self.origin)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class View:
     """A pinhole view (camera or projector).
 
@@ -167,7 +167,7 @@ class View:
         return c**3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Hits:
     """First hits of rays: quad index (-1 = none), distance, local coordinates, front side."""
 

@@ -57,7 +57,7 @@ class Pose:
     fov_deg: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Scene:
     """A validated scene.
 

@@ -69,7 +69,7 @@ class Geometry:
     patch_size: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Setup:
     """Precomputed light-transport arrays of one scene and rig geometry.
 
@@ -350,7 +350,7 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     normal = quads.normal
     camera, projector = views(scene, geometry)
     h, w = geometry.resolution
-    steps = 5
+    steps = 4
     report(progress, 0, steps, "casting camera rays")
 
     # --- camera pixels -------------------------------------------------------------------

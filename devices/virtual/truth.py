@@ -18,7 +18,7 @@ from engine._checks import check_kappa, check_mask, check_order
 from engine.errors import InputError
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Components:
     """Ground-truth interaction components of one target (paper Eqs. 2-4).
 

@@ -186,3 +186,15 @@ def test_natural_lighting_of_the_wedge_is_the_projector_flood(cache):
     np.testing.assert_allclose(img, rig.truth.photograph(ambient=False, pattern=np.ones((32, 32, 3), np.float32)),
                                rtol=1e-5, atol=1e-7)
     assert img[rig.targets["union"]].min() > 0
+
+
+def test_cold_set_up_reports_progress(tmp_path):
+    calls = []
+    open_rig("wedge", resolution=(16, 16), cache_dir=tmp_path, patch_size=0.3,
+             progress=lambda step, total, message: calls.append((step, total, message)))
+    assert calls[0][0] == 0 and calls[-1][0] == calls[-1][1] and len(calls) >= 4
+    assert all(isinstance(m, str) and m for _, _, m in calls)
+    calls.clear()
+    open_rig("wedge", resolution=(16, 16), cache_dir=tmp_path, patch_size=0.3,
+             progress=lambda *a: calls.append(a))
+    assert calls == []  # cached: no work to report
