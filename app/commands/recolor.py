@@ -7,6 +7,7 @@ from pathlib import Path
 
 from app.commands._args import kappa
 from engine.errors import InputError, SessionError
+from engine.denoise import denoise_components
 from engine.imageio import write_image
 from engine.recolor import recolor
 from engine.session import Session
@@ -19,6 +20,23 @@ def add_arguments(parser) -> None:
     parser.add_argument("--kappa", type=kappa, required=True, metavar="R,G,B", help="albedo scale of the target")
     parser.add_argument("-o", "--output", type=Path, required=True, help="output image (.exr, .tif, .png)")
     parser.add_argument("--half", action="store_true", help="EXR: write half floats")
+    add_denoise_option(parser)
+
+
+def add_denoise_option(parser) -> None:
+    """``--denoise RADIUS``: guided-filter the interaction components (0 = off)."""
+    parser.add_argument("--denoise", type=int, default=0, metavar="RADIUS",
+                        help="guided-filter radius for the interaction components, 0 = off (default %(default)s)")
+
+
+def denoised(session: Session, d, radius: int):
+    """The decomposition with its interaction components denoised, guided by the photograph."""
+    if radius <= 0:
+        return d
+    photo = next((session.read_capture(r.name) for r in session.captures if r.meta.get("kind") == "photograph"), None)
+    if photo is None:
+        raise SessionError(f"session {session.path} has no photograph capture to guide the denoising")
+    return denoise_components(d, photo, radius=radius)
 
 
 def decomposition_for(session: Session, target: str | None):
@@ -58,7 +76,7 @@ def _display(image):
 def run(args) -> int:
     session = Session.open(args.session)
     d, plan = decomposition_for(session, args.target)
-    out = recolor(d, args.kappa)
+    out = recolor(denoised(session, d, args.denoise), args.kappa)
     write_edit(args.output, out, plan=plan, kappa_value=args.kappa, half=args.half)
     session.update(edit={"kappa": args.kappa.tolist()})
     print(f"wrote {args.output}", file=sys.stderr)

@@ -24,7 +24,7 @@ def test_every_command_has_help(command, capsys):
 
 def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     out = tmp_path / "demo"
-    result = _run("demo", "-o", str(out), "--ideal", "--resolution", "32", "--frames", "1")
+    result = _run("demo", "-o", str(out), "--ideal", "--resolution", "32", "--frames", "1", "--denoise", "0")
     assert result.returncode == 0, result.stderr
     error = float(result.stdout.strip())
     assert error < 0.5  # percent, ideal rig at 32x32
