@@ -81,7 +81,10 @@ class _Plan:
         self.base = base
         self.prefix = prefix
         self.emitters = [
-            Emitter(p.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau, settings.negative)
+            Emitter(
+                p.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau,
+                settings.negative, p.direct_matrix,
+            )
             for p in prepared
         ]
         self.predictors = [Predictor(p.mask) for p in prepared]
@@ -206,14 +209,14 @@ def acquire_cascade(
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
     adaptive = adaptive or Adaptive(Policy.BRUTE)
     t_count = len(targets)
-    d_cost = 0 if prepared is not None else t_count * pattern_budget(settings.per_channel)
+    d_cost = 0 if prepared is not None else t_count * pattern_budget(True)
     recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + (k**t_count - 1) * settings.captures_per_step()
     photo_pattern = recorder.black() if photograph_pattern is None else np.asarray(photograph_pattern, np.float32)
     photograph = recorder.capture(f"{prefix}-photograph", photo_pattern, meta={"kind": "photograph"})
     base = photograph if photograph_pattern is None else recorder.capture(f"{prefix}-black", recorder.black(), meta={"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{n}", per_channel=settings.per_channel)
+            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{n}")
             for n, m in targets
         ]
     plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)

@@ -75,6 +75,10 @@ class Emitter:
     tau : float
         Largest linear light fraction emitted (Sec. 6, step 1), in (0, 1].
     negative : {"clamp", "split"}
+    direct_matrix : (H, W, 3, 3) float32, optional
+        Per-pixel direct response of each camera channel to each primary. With
+        ``per_channel=False`` the RGB pattern solves ``direct_matrix @ light = wanted`` per
+        pixel: colour crosstalk corrected, one capture per re-emission.
     """
 
     correspondence: Correspondence
@@ -84,6 +88,7 @@ class Emitter:
     per_channel: bool = True
     tau: float = 1.0
     negative: str = Negative.CLAMP
+    direct_matrix: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 < float(self.tau) <= 1.0:
@@ -106,8 +111,7 @@ class Emitter:
             Number of target pixel-channels whose negative value was emitted as zero.
         """
         t = self.target[:, :, None]
-        d = np.where(t, self.direct, 1.0)
-        light = np.where(t, wanted / d, 0.0).astype(np.float32)  # linear projector light, camera space
+        light = self._light(wanted)  # linear projector light per primary, camera space
         clamped = int(np.count_nonzero((light < 0) & t))
         if self.negative == Negative.SPLIT:
             parts = [(np.maximum(light, 0), 1, ""), (np.maximum(-light, 0), -1, "-neg")]
@@ -130,6 +134,17 @@ class Emitter:
                     proj = self.response.linearize(proj)
                 out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix))
         return out, clamped
+
+    def _light(self, wanted: np.ndarray) -> np.ndarray:
+        """Projector light (per primary, camera pixels) whose direct reflection is ``wanted``."""
+        t = self.target[:, :, None]
+        if self.per_channel or self.direct_matrix is None:
+            d = np.where(t, self.direct, 1.0)
+            return np.where(t, wanted / d, 0.0).astype(np.float32)
+        light = np.zeros(wanted.shape, np.float32)
+        m = self.direct_matrix[self.target].astype(np.float64)
+        light[self.target] = np.linalg.solve(m, np.asarray(wanted, np.float64)[self.target][..., None])[..., 0]
+        return light
 
     @staticmethod
     def combine(emissions: list[Emission], captures: list[np.ndarray], base: np.ndarray) -> np.ndarray:

@@ -40,6 +40,10 @@ class PreparedTarget:
         The rig's correspondence with the target's undecoded pixels filled in.
     filled : int
         Target pixels whose projector pixel was interpolated from their neighbours.
+    direct_matrix : (H, W, 3, 3) float32 or None
+        Per pixel, camera channel c's direct radiance per unit of projector primary k
+        (``[..., c, k]``): colour crosstalk and albedo together. Measured when D is measured
+        per primary; lets one RGB emission replace three single-primary ones.
     """
 
     mask: np.ndarray
@@ -47,6 +51,7 @@ class PreparedTarget:
     direct: np.ndarray
     correspondence: Correspondence
     filled: int = 0
+    direct_matrix: np.ndarray | None = None
 
     def report(self) -> str:
         """One line for logs and dialogs."""
@@ -88,8 +93,9 @@ def prepare_target(
     name : str
         Prefix of the capture names (distinguishes targets of a cascade).
     per_channel : bool
-        Measure D on each projector primary separately (needed for per-channel emission
-        when the projector's primaries leak into other camera channels).
+        Measure D on each projector primary separately (3× the captures): needed for
+        per-channel emission when the primaries leak into other camera channels, and gives
+        the per-pixel 3×3 ``direct_matrix`` that corrects crosstalk in RGB emission.
     period, shifts : int
         High-frequency pattern parameters, see :func:`engine.calibrate.high_frequency_patterns`.
     floor : float
@@ -126,10 +132,14 @@ def prepare_target(
     patterns = high_frequency_patterns(calibration.projector_resolution, mask_projector=footprint, period=period, shifts=shifts)
     lit_full, unlit_full = _neighbourhood_states(patterns, corr, painted_valid, footprint)
     groups = [(c,) for c in range(3)] if per_channel else [(0, 1, 2)]
-    direct = np.zeros(base.shape, np.float32)
-    for channels in groups:
+    # matrix[..., c, g]: camera channel c's direct light per unit of primary group g
+    matrix = np.zeros(base.shape + (len(groups),), np.float32)
+    n_plus = lit_full.sum(axis=0)[:, :, None]
+    n_minus = unlit_full.sum(axis=0)[:, :, None]
+    ok = painted_valid[:, :, None] & (n_plus > 0) & (n_minus > 0)
+    for g, channels in enumerate(groups):
         label = "rgb"[channels[0]] if per_channel else "rgb"
-        plus = np.zeros(base.shape[:2] + (len(channels),), np.float64)
+        plus = np.zeros(base.shape, np.float64)
         minus = np.zeros_like(plus)
         for i, pattern in enumerate(patterns):
             shown = np.zeros_like(pattern)
@@ -137,14 +147,11 @@ def prepare_target(
             if calibration.response is not None:
                 shown = calibration.response.linearize(shown)
             cap = recorder.capture(f"{name}-direct-{label}-{i:02d}", shown, meta={"kind": "direct"})
-            light = (cap - base)[..., channels]
+            light = cap - base
             plus += np.where(lit_full[i][:, :, None], light, 0)
             minus += np.where(unlit_full[i][:, :, None], light, 0)
-        n_plus = lit_full.sum(axis=0)[:, :, None]
-        n_minus = unlit_full.sum(axis=0)[:, :, None]
-        ok = (n_plus > 0) & (n_minus > 0)
-        d = np.where(ok, plus / np.maximum(n_plus, 1) - minus / np.maximum(n_minus, 1), 0)
-        direct[..., channels] = np.where(painted_valid[:, :, None], d, 0)
+        matrix[..., g] = np.where(ok, plus / np.maximum(n_plus, 1) - minus / np.maximum(n_minus, 1), 0)
+    direct = np.stack([matrix[..., c, c] for c in range(3)], -1) if per_channel else matrix[..., 0]
     med = np.median(direct[painted_valid], axis=0)
     usable = painted_valid & (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
     if not usable.any():
@@ -152,7 +159,8 @@ def prepare_target(
     if smooth > 0:
         direct = _smooth_ratio(direct, photograph, usable, smooth)
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
-    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()))
+    matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
+    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix)
 
 
 def _smooth_ratio(direct: np.ndarray, photograph: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
