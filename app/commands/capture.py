@@ -10,14 +10,17 @@ import numpy as np
 from app.cli import ProgressBar
 from app.commands._args import add_rig_options, kappa, open_rig
 from engine.acquire import Adaptive, CaptureSettings
-from engine.errors import InputError
+from engine.errors import InputError, SessionError
 from engine.imageio import read_image
 from engine.session import Session
-from engine.workflow import run_capture
+from app.commands.calibrate import open_or_create
+from engine.workflow import load_calibration, run_capture, save_calibration
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("session", type=Path, help="a calibrated session folder (`albedit calibrate`)")
+    parser.add_argument("session", type=Path, help="a calibrated session folder (`albedit calibrate`), or a new one with --calibration")
+    parser.add_argument("--calibration", type=Path, default=None, metavar="SESSION",
+                        help="re-use the calibration of another session of the same rig (refused if the rig differs)")
     add_rig_options(parser)
     parser.add_argument(
         "--target", action="append", required=True, metavar="NAME[=MASK.png]",
@@ -50,9 +53,19 @@ def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
 
 
 def run(args) -> int:
-    session = Session.open(args.session)
-    session.recover_orphans()
     with open_rig(args) as rig:
+        if args.calibration is not None:
+            calibration = load_calibration(Session.open(args.calibration))
+            calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+            session = open_or_create(args.session, rig)
+            if session.read_calibration()[0]:
+                if session.read_calibration()[0] != calibration.to_dict()[0]:
+                    raise SessionError(f"session {args.session} already has a different calibration; use a new session folder")
+            else:
+                save_calibration(session, calibration)
+        else:
+            session = Session.open(args.session)
+            session.recover_orphans()
         targets = _targets(args, rig)
         flood = None
         if args.flood is not None:

@@ -58,3 +58,15 @@ def test_bad_input_gives_one_line_errors_and_nonzero_exit(tmp_path, args, messag
     lines = [line for line in result.stderr.strip().splitlines() if line.strip()]
     assert message in lines[-1]
     assert "Traceback" not in result.stderr
+
+
+def test_a_calibration_is_reused_across_sessions_of_the_same_rig_only(tmp_path):
+    rig = ["--rig", "virtual:cornell", "--ideal", "--resolution", "24"]
+    assert _run("calibrate", str(tmp_path / "cal"), *rig).returncode == 0
+    reused = _run("capture", str(tmp_path / "s2"), *rig, "--calibration", str(tmp_path / "cal"), "--target", "right_wall", "--order", "2")
+    assert reused.returncode == 0, reused.stderr
+    other = _run("capture", str(tmp_path / "s3"), "--rig", "virtual:cornell", "--ideal", "--resolution", "32",
+                 "--calibration", str(tmp_path / "cal"), "--target", "right_wall", "--order", "2")
+    assert other.returncode == 1
+    assert "calibration was made for camera 24×24" in other.stderr.strip().splitlines()[-1]
+    assert not (tmp_path / "s3").exists()
