@@ -53,6 +53,8 @@ class Recorder:
         Names captured now, and names read back from the session.
     planned : int
         Number of captures the current plan expects (for progress).
+    last_saturated : (H, W) bool or None
+        Clipped pixels of the last capture (after bracketing), None if unknown.
     """
 
     rig: object
@@ -66,6 +68,7 @@ class Recorder:
     taken: list[str] = field(default_factory=list)
     reused: list[str] = field(default_factory=list)
     planned: int = 0
+    last_saturated: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -105,7 +108,8 @@ class Recorder:
                     f"capture {name!r} in {self.session.path} was taken with a different projector pattern; "
                     "the acquisition settings changed since: use a new session folder"
                 )
-            image = self.session.read_capture(name)
+            loaded = self.session.load_capture(name)
+            image, self.last_saturated = loaded.image, loaded.saturated
             self.reused.append(name)
         else:
             checkpoint(self.should_stop, "acquisition")
@@ -113,6 +117,7 @@ class Recorder:
             self.rig.projector.show(pattern)
             frame = self._bracketed(self._shot())
             image = np.asarray(frame.image, np.float32)
+            self.last_saturated = np.asarray(frame.saturated, bool)
             if self.session is not None:
                 self.session.add_frame(name, frame, pattern_id=pid, meta=meta or {})
             self.taken.append(name)

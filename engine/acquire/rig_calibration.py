@@ -76,7 +76,7 @@ def calibrate_rig(
             "the camera saw no change between projector black and white: is the projector on, "
             "pointed at the scene, and the camera's exposure long enough?"
         )
-    report_ = exposure_report(white)
+    report_ = exposure_report(white, saturated=recorder.last_saturated, black=black)
     gray = gray_code_patterns(proj_res)
     gray_caps = [recorder.capture(f"cal-gray-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(gray)]
     corr = decode_gray_code(gray_caps, proj_res)
