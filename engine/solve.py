@@ -16,6 +16,7 @@ or two small matrix products and there is no Python loop per pixel.
 
 from __future__ import annotations
 
+import threading
 from enum import StrEnum
 from itertools import combinations
 
@@ -23,6 +24,11 @@ import numpy as np
 
 from engine._checks import check_choice
 from engine.errors import InputError
+
+
+#: numba's default threading layer (workqueue) must not launch parallel kernels from two
+#: threads at once; the app runs engine work on worker threads.
+_KERNEL_LOCK = threading.Lock()
 
 
 class Constraint(StrEnum):
@@ -275,7 +281,8 @@ def solve_systems(b, selector, solvers, destinations, out, extra=None, residual=
     extra = np.zeros(count, out.dtype) if extra is None else extra
     res = np.zeros(count, np.float64) if residual is None else residual
     unresolved = np.zeros(count, np.bool_)
-    kkt_columns(b, np.asarray(selector, np.int64), tests, maps, orders, a, dest, tol, out, extra, res, unresolved)
+    with _KERNEL_LOCK:
+        kkt_columns(b, np.asarray(selector, np.int64), tests, maps, orders, a, dest, tol, out, extra, res, unresolved)
     if unresolved.any():
         for g, solver in enumerate(solvers):
             cols = np.flatnonzero(unresolved & (selector == g))

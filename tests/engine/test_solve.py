@@ -95,3 +95,16 @@ def test_constraint_names():
 def test_rank_deficient_system_is_refused():
     with pytest.raises(InputError, match="full column rank"):
         ConeSolver(np.ones((3, 3)), np.eye(3))
+
+
+def test_concurrent_solves_from_threads_agree():
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(3)
+    b = _noisy_columns(5, 20000, rng).astype(np.float32)
+    solver = ConeSolver(transport_matrix(5), cone_basis(5, "ordered"))
+    expected = solver.solve(b)
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda _: solver.solve(b), range(8)))
+    for r in results:
+        np.testing.assert_array_equal(r, expected)
