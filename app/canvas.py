@@ -17,8 +17,8 @@ from app.painting import EventType, MouseEvent, Painter, Tool
 from app.render import Frame, View
 
 _BACKGROUND = QColor(38, 38, 40)
-_OVERLAY_ALPHA = 105
-_CURRENT_ALPHA = 140
+_OVERLAY_ALPHA = 40
+_CURRENT_ALPHA = 70
 
 
 def _qimage(words: np.ndarray) -> QImage:
@@ -130,24 +130,36 @@ class Canvas(QWidget):
         return self.frame is None or self.frame.view != View.COMPONENTS
 
     # ------------------------------------------------------------------ overlays
-    def _target_word(self, colour, current: bool) -> np.uint32:
-        a = _CURRENT_ALPHA if current else _OVERLAY_ALPHA
-        r, g, b = (int(c * a / 255) for c in colour)
-        return np.uint32((a << 24) | (r << 16) | (g << 8) | b)
+    @staticmethod
+    def _word(colour, alpha: int) -> np.uint32:
+        r, g, b = (int(c * alpha / 255) for c in colour)  # premultiplied ARGB
+        return np.uint32((alpha << 24) | (r << 16) | (g << 8) | b)
 
     def _compose(self, y0: int, y1: int, x0: int, x1: int) -> None:
-        region = self._overlay[y0:y1, x0:x1]
-        region[...] = 0
+        """Redraw the overlay in a box: light fill, strong outline, hatched unreachable pixels."""
+        h, w = self.doc.shape
+        # one extra pixel around the box so outlines at its border see their neighbours
+        ey0, ey1, ex0, ex1 = max(y0 - 1, 0), min(y1 + 1, h), max(x0 - 1, 0), min(x1 + 1, w)
+        region = np.zeros((ey1 - ey0, ex1 - ex0), np.uint32)
+        painted = np.zeros(region.shape, bool)
         for t in self.doc.targets:
-            region[t.mask[y0:y1, x0:x1]] = self._target_word(t.colour, t.uid == self.doc.current)
+            m = t.mask[ey0:ey1, ex0:ex1]
+            if not m.any():
+                continue
+            p = np.pad(m, 1, mode="edge")
+            interior = p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:] & m
+            current = t.uid == self.doc.current
+            region[m] = self._word(t.colour, _CURRENT_ALPHA if current else _OVERLAY_ALPHA)
+            region[m & ~interior] = self._word(t.colour, 255 if current else 200)
+            painted |= m
         if self.doc.unreachable is not None:
-            unreach = self.doc.unreachable[y0:y1, x0:x1]
+            unreach = self.doc.unreachable[ey0:ey1, ex0:ex1]
             if unreach.any():
-                yy, xx = np.mgrid[y0:y1, x0:x1]
-                stripe = ((xx + yy) // 3) % 3 == 0
-                painted = region != 0
-                region[unreach & stripe & ~painted] = np.uint32(0x50505050)  # grey hatch
-                region[unreach & stripe & painted] = np.uint32(0xE0E00000)  # refused: red hatch
+                yy, xx = np.mgrid[ey0:ey1, ex0:ex1]
+                stripe = ((xx + yy) // 2) % 4 == 0
+                region[unreach & stripe & ~painted] = np.uint32(0x40404040)  # grey hatch: not reachable
+                region[unreach & stripe & painted] = np.uint32(0xF0F00000)  # red hatch: painted but refused
+        self._overlay[y0:y1, x0:x1] = region[y0 - ey0 : y1 - ey0, x0 - ex0 : x1 - ex0]
 
     def _rebuild_overlay(self) -> None:
         h, w = self.doc.shape

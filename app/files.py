@@ -10,7 +10,7 @@ kept in the session's JSON state under ``"edits"``::
                      "constraint": ..., "unreached_light": ...}}
 
 Masks are stored under content-addressed names (``edit-<sha>``) and the decomposition in the
-session cache under ``decomposition-<key>``, all *before* the state is rewritten, so a save
+session cache under the acquisition's key, all *before* the state is rewritten, so a save
 that fails half way leaves the previous save intact ("nothing lost").
 
 Which capture is the photograph: ``edits.photograph``, else ``state["photograph"]``, else a
@@ -82,13 +82,15 @@ def open_document(path, *, history=None) -> tuple[Document, Session | None, list
 
 
 def _photograph_name(session: Session, edits: dict) -> str:
-    names = [c.name for c in session.captures]
+    records = session.captures
+    names = [c.name for c in records]
     if not names:
         raise SessionError(f"session {session.path} has no capture: there is no photograph to edit")
     for candidate in (edits.get("photograph"), session.state.get("photograph"), PHOTOGRAPH):
         if isinstance(candidate, str) and candidate in names:
             return candidate
-    return names[0]
+    kinds = [c.name for c in records if isinstance(c.meta, dict) and c.meta.get("kind") == "photograph"]
+    return kinds[-1] if kinds else names[0]
 
 
 def _document_from_session(session: Session, *, history=None) -> tuple[Document, list[str]]:
@@ -110,11 +112,17 @@ def _document_from_session(session: Session, *, history=None) -> tuple[Document,
         except (KeyError, TypeError, InputError, SessionError) as exc:
             warnings.append(f"target {entry.get('name', '?')!r} could not be restored: {exc}")
     acq = edits.get("acquisition")
+    plan = state.get("plan")
     if isinstance(acq, dict):
         try:
             _restore_acquisition(doc, session, acq)
         except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
             warnings.append(f"the acquisition could not be restored ({exc}); acquire again to recolor")
+    elif not edits and isinstance(plan, dict) and state.get("status") == "captured":
+        try:
+            _restore_plan(doc, session, plan)
+        except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
+            warnings.append(f"the captured plan could not be restored ({exc})")
     current = edits.get("current")
     for t in doc.targets:
         if t.name == current:
@@ -124,17 +132,39 @@ def _document_from_session(session: Session, *, history=None) -> tuple[Document,
     return doc, warnings
 
 
-def _restore_acquisition(doc: Document, session: Session, acq: dict) -> None:
-    arrays = session.cache_get(f"decomposition-{acq['key']}")
+def _decomposition_from_cache(session: Session, key: str, acq: dict | None = None) -> Decomposition:
+    arrays = session.cache_get(key)
     if arrays is None:
-        raise SessionError("its decomposition is missing from the session cache")
-    d = Decomposition(
-        arrays["components"], arrays["unreached"], arrays["target"].astype(bool),
-        str(acq.get("constraint", "ordered")), bool(acq.get("unreached_light", True)),
-        arrays.get("residual"),
-    )
+        raise SessionError(f"its decomposition {key!r} is missing from the session cache")
+    if "flags" in arrays:  # the layout engine.workflow.cache_decomposition writes
+        constraint = bytes(arrays["constraint"]).decode().strip()
+        unreached_light = bool(arrays["flags"][0])
+    else:
+        constraint = str((acq or {}).get("constraint", "ordered"))
+        unreached_light = bool((acq or {}).get("unreached_light", True))
+    return Decomposition(arrays["components"], arrays["unreached"], arrays["target"].astype(bool),
+                         constraint, unreached_light, arrays.get("residual"))
+
+
+def _restore_acquisition(doc: Document, session: Session, acq: dict) -> None:
+    key = str(acq["key"])
+    d = _decomposition_from_cache(session, key, acq)
     cascade = [doc.by_name(n).uid for n in acq["cascade"]]
-    doc.set_acquisition(cascade, d, key=str(acq["key"]))
+    doc.set_acquisition(cascade, d, key=key)
+
+
+def _restore_plan(doc: Document, session: Session, plan: dict) -> None:
+    """A session captured by ``albedit capture`` (engine.workflow): its targets, fixed κ, decomposition."""
+    from engine.workflow import plan_key
+
+    names = [str(n) for n in plan["targets"]]
+    fixed = list(plan.get("fixed_kappa", []))
+    for i, name in enumerate(names):
+        kappa = fixed[i] if i < len(fixed) else 1.0
+        doc.add_target(name, session.read_mask(name), kappa=kappa)
+    key = plan_key(session)
+    d = _decomposition_from_cache(session, key)
+    doc.set_acquisition([doc.by_name(n).uid for n in names], d, key=key)
 
 
 # ----------------------------------------------------------------------------- saving
@@ -202,12 +232,8 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
     acq = document.acquisition
     if acq is not None:
         d = acq.decomposition
-        key = f"decomposition-{acq.key}"
-        if session.cache_get(key) is None:
-            arrays = {"components": d.components, "unreached": d.unreached, "target": d.target}
-            if d.residual is not None:
-                arrays["residual"] = d.residual
-            session.cache_put(key, arrays)
+        if not (Path(session.path) / "cache" / f"{acq.key}.npz").is_file():
+            session.cache_put(acq.key, _cache_arrays(d))
         edits["acquisition"] = {
             "key": acq.key,
             "cascade": [document.target(u).name for u in acq.cascade],
@@ -218,6 +244,20 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
     session.update(edits=edits)
     if mark_saved:
         document.mark_saved()
+
+
+def _cache_arrays(d: Decomposition) -> dict:
+    """The cache layout of engine.workflow.cache_decomposition, so either side can read it."""
+    arrays = {
+        "components": d.components,
+        "unreached": d.unreached,
+        "target": d.target,
+        "flags": np.array([d.unreached_light], bool),
+        "constraint": np.frombuffer(str(d.constraint).encode().ljust(16), np.uint8),
+    }
+    if d.residual is not None:
+        arrays["residual"] = d.residual
+    return arrays
 
 
 def _mask_name(mask: np.ndarray) -> str:

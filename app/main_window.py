@@ -8,6 +8,7 @@ as dialogs with the engine's message; nothing the user did is dropped when somet
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 from PySide6.QtCore import QSettings, QSignalBlocker, Qt, QTimer
@@ -29,6 +30,7 @@ from PySide6.QtWidgets import (
 
 from app import files
 from app.canvas import Canvas
+from app.history import History
 from app.model import Document
 from app.painting import Painter, Tool
 from app.panels import AlbedoPanel, TargetPanel
@@ -37,6 +39,7 @@ from app.qt_history import QtHistory
 from app.render import NEEDS_TRUTH, View, component_grid
 from app.worker import Job
 from engine.errors import InputError
+from engine.session import Session
 
 APP_NAME = "Albedit"
 MAX_RECENT = 8
@@ -49,6 +52,10 @@ _VIEW_LABELS = {
     View.COMPONENTS: "Interaction &Components",
     View.TRUTH: "&Ground Truth",
     View.ERROR: "&Error vs Ground Truth",
+}
+_VIEW_SHORT = {
+    View.RECOLORED: "Recolored", View.ORIGINAL: "Original", View.SPLIT: "Split", View.DIFFERENCE: "Difference",
+    View.COMPONENTS: "Components", View.TRUTH: "Truth", View.ERROR: "Error",
 }
 _TOOL_KEYS = {Tool.BRUSH: "B", Tool.ERASER: "E", Tool.POLYGON: "P", Tool.LASSO: "L", Tool.FILL: "F"}
 _EXPORT_FILTERS = {
@@ -131,6 +138,7 @@ class MainWindow(QMainWindow):
         self.doc: Document | None = None
         self.session = session
         self.rig = rig
+        self.scratch: Path | None = None
         self.job: Job | None = None
         self.undo_group = QUndoGroup(self)
         self.preview: PreviewController | None = None
@@ -176,7 +184,10 @@ class MainWindow(QMainWindow):
         self.act_undo = self.undo_group.createUndoAction(self, "&Undo")
         self.act_undo.setShortcuts(QKeySequence.keyBindings(K.Undo))
         self.act_redo = self.undo_group.createRedoAction(self, "&Redo")
-        self.act_redo.setShortcuts(QKeySequence.keyBindings(K.Redo) + [QKeySequence("Ctrl+Shift+Z")])
+        redo_keys = QKeySequence.keyBindings(K.Redo)
+        if QKeySequence("Ctrl+Shift+Z") not in redo_keys:  # the issue's binding, on every platform
+            redo_keys.append(QKeySequence("Ctrl+Shift+Z"))
+        self.act_redo.setShortcuts(redo_keys)
         for a in (self.act_undo, self.act_redo):
             self.addAction(a)
         self.act_add = self._action("&Add Target", lambda: self._guard(self.doc.add_target), "Ctrl+T")
@@ -191,6 +202,7 @@ class MainWindow(QMainWindow):
         self.tool_actions: dict[Tool, QAction] = {}
         for tool, key in _TOOL_KEYS.items():
             a = self._action(tool.value.capitalize(), lambda _c=False, t=tool: self.set_tool(t), key, checkable=True)
+            a.setToolTip(f"{tool.value.capitalize()} ({key})")
             self.tool_group.addAction(a)
             self.tool_actions[tool] = a
         self.tool_actions[Tool.BRUSH].setChecked(True)
@@ -200,6 +212,8 @@ class MainWindow(QMainWindow):
         self.view_actions: dict[View, QAction] = {}
         for i, (view, label) in enumerate(_VIEW_LABELS.items()):
             a = self._action(label, lambda _c=False, v=view: self.set_view(v), str(i + 1), checkable=True)
+            a.setIconText(_VIEW_SHORT[view])
+            a.setToolTip(f"{label.replace('&', '')} ({i + 1})")
             self.view_group.addAction(a)
             self.view_actions[view] = a
         self.view_actions[View.RECOLORED].setChecked(True)
@@ -313,12 +327,15 @@ class MainWindow(QMainWindow):
         sb.addPermanentWidget(self.zoom_label)
 
     # ================================================================== document
-    def set_document(self, document: Document, session=None, *, rig=None) -> None:
-        """Show ``document`` (replacing the current one, whose rig is closed)."""
+    def set_document(self, document: Document, session=None, *, rig=None, scratch: Path | None = None) -> None:
+        """Show ``document`` (replacing the current one, whose rig is closed).
+
+        ``scratch`` is a temporary folder holding ``session`` (the demo's): Save copies the
+        session elsewhere, and the folder is deleted when the document is closed.
+        """
         self._teardown()
         self.doc, self.session = document, session
-        if rig is not None:
-            self.rig = rig
+        self.rig, self.scratch = rig, scratch
         stack = QUndoStack(self)
         document.use_history(QtHistory(stack))
         self.undo_group.addStack(stack)
@@ -353,9 +370,10 @@ class MainWindow(QMainWindow):
         self.preview.request()
         self._update_title()
         self._update_actions()
-        QTimer.singleShot(0, self.canvas.fit)
 
     def _teardown(self) -> None:
+        if self.doc is not None:  # the document outlives its window: back to a Qt-free history
+            self.doc.use_history(History())
         if self.preview is not None:
             self.preview.close()
             self.preview.deleteLater()
@@ -363,11 +381,13 @@ class MainWindow(QMainWindow):
             self.undo_group.removeStack(stack)
             stack.deleteLater()
         self.preview = self.canvas = self.painter = None
-        if self.rig is not None:
-            try:
-                self.rig.close()
-            finally:
-                self.rig = None
+        rig, scratch, self.rig, self.scratch = self.rig, self.scratch, None, None
+        try:
+            if rig is not None:
+                rig.close()
+        finally:
+            if scratch is not None:
+                shutil.rmtree(scratch, ignore_errors=True)
 
     @staticmethod
     def _padded(w: QWidget) -> QWidget:
@@ -387,7 +407,9 @@ class MainWindow(QMainWindow):
     # ================================================================== state → UI
     def _update_title(self) -> None:
         name = "(no document)"
-        if self.session is not None:
+        if self.scratch is not None and self.doc is not None:
+            name = f"{self.doc.source} demo (not saved)"
+        elif self.session is not None:
             name = Path(self.session.path).name
         elif self.doc is not None:
             name = Path(self.doc.source).name if self.doc.source and ":" not in self.doc.source else self.doc.source or "untitled"
@@ -505,12 +527,9 @@ class MainWindow(QMainWindow):
         except InputError as exc:
             self.show_error("Cannot acquire", exc)
             return
-        try:
-            import engine.acquire  # noqa: F401 - written by the lead; wired in the acquisition task
-        except ImportError:
-            self.show_error("Cannot acquire", InputError("acquisition (engine.acquire) is not available in this build"))
-            return
-        self.show_error("Cannot acquire", InputError("the acquisition panel is not wired to engine.acquire yet"))
+        self.show_error("Cannot acquire here yet", InputError(
+            "the targets can be acquired, but the acquisition panel is not part of this build: "
+            "run `albedit capture` on a session, then open it here"))
 
     def _guard(self, fn, *args):
         try:
@@ -577,8 +596,15 @@ class MainWindow(QMainWindow):
             return
         from app.demo import open_demo
 
-        self.run_job(open_demo, rig_name, name=f"Opening {rig_name}",
-                     on_done=lambda res: self.set_document(res[0], None, rig=res[1]))
+        def done(result):
+            doc, rig, session = result
+            self.set_document(doc, session, rig=rig, scratch=None if session is None else Path(session.path).parent)
+            if session is not None:
+                self.statusBar().showMessage(
+                    f"Acquired {doc.targets[-1].name!r} on {rig_name} and recolored it as in the paper's Fig. 6; "
+                    "try the κ sliders and the Error view", 15000)
+
+        self.run_job(open_demo, rig_name, name=f"Opening the {rig_name} demo", on_done=done)
 
     def open_path(self, path) -> bool:
         """Open a session folder or an image; errors are shown, nothing else changes."""
@@ -589,8 +615,6 @@ class MainWindow(QMainWindow):
         except (InputError, OSError, Exception) as exc:  # noqa: BLE001 - any failure is shown, state unchanged
             self.show_error("Cannot open", exc)
             return False
-        self._teardown()
-        self.rig = None
         self.set_document(doc, session)
         self._add_recent(path)
         if warnings:
@@ -613,12 +637,13 @@ class MainWindow(QMainWindow):
         """Save into the current session (Save As when there is none). True when saved."""
         if self.doc is None:
             return False
-        if self.session is None:
+        if self.session is None or self.scratch is not None:
             return self.save_as()
         return self._save_into(self.session, None)
 
     def save_as(self, path=None) -> bool:
-        """Create a new session folder holding the photograph and the edit."""
+        """Save into a new session folder: a copy of the current session (captures, calibration)
+        or, for a plain image, a new session holding the photograph; then the edit."""
         if self.doc is None:
             return False
         if path is None:
@@ -634,15 +659,27 @@ class MainWindow(QMainWindow):
         if self.rig is not None:
             projector = tuple(self.rig.projector.resolution)
 
+        source = self.session
+
         def work(progress=None, should_stop=None):
-            if new_path is not None:
+            if new_path is not None and source is not None:
+                if new_path.exists() and any(new_path.iterdir()):
+                    raise InputError(f"{new_path} exists and is not empty: choose a new folder name")
+                shutil.copytree(source.path, new_path, dirs_exist_ok=True)
+                target = Session.open(new_path)
+            elif new_path is not None:
                 return files.create_session(new_path, doc, projector_resolution=projector, mark_saved=False)
-            files.save_document(doc, session, mark_saved=False)
-            return session
+            else:
+                target = session
+            files.save_document(doc, target, mark_saved=False)
+            return target
 
         outcome = {}
 
         def done(s):
+            if self.scratch is not None:  # the demo's scratch folder is no longer needed
+                shutil.rmtree(self.scratch, ignore_errors=True)
+                self.scratch = None
             self.session = s
             doc.mark_saved()
             outcome["ok"] = True

@@ -412,20 +412,28 @@ class Document:
         cascade : sequence of int
             Target uids, first to last, as acquired.
         decomposition : engine.decompose.Decomposition
-            Decomposition of the last target; its ``target`` must equal that target's mask.
+            Decomposition of the last target; its ``target`` is that target's mask, or the part
+            of it the projector could reach (acquisition drops unreachable pixels).
         key : str, optional
             Id of the measurement (default: a new random one).
         """
         cascade = tuple(int(u) for u in cascade)
         if not cascade:
             raise InputError("cascade must name at least one target")
-        self.check_acquirable(cascade)
+        if len(set(cascade)) != len(cascade):
+            raise InputError(f"cascade names a target twice: {list(cascade)}")
+        for u in cascade:
+            self.target(u)
         last = self.target(cascade[-1])
         dshape = tuple(np.shape(decomposition.target))
         if dshape != self.shape:
             raise InputError(f"decomposition is {dshape}, the photograph is {self.shape}: they must match")
-        if not np.array_equal(decomposition.target, last.mask):
-            raise InputError(f"decomposition.target differs from the mask of {last.name!r}, the last cascade target")
+        outside = int(np.count_nonzero(np.asarray(decomposition.target) & ~last.mask))
+        if outside:
+            raise InputError(
+                f"decomposition.target has {outside} pixels outside the mask of {last.name!r}, the last cascade "
+                "target; it must be that mask (or the part of it the projector could reach)"
+            )
         self.end_stroke()
         self.end_kappa_gesture()
         self.acquisition = Acquisition(
@@ -433,7 +441,7 @@ class Document:
             tuple(self.target(u).kappa.copy() for u in cascade),
             tuple(self.target(u).mask.copy() for u in cascade),
             decomposition,
-            key or uuid.uuid4().hex[:12],
+            key or f"decomposition-{uuid.uuid4().hex[:12]}",
         )
         # Undoing an earlier edit of a now-locked target would break the measurement.
         self.history.clear()

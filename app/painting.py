@@ -123,7 +123,13 @@ def capsule(p0: tuple[float, float], p1: tuple[float, float], radius: float, sha
 def polygon_mask(points, shape: tuple[int, int]):
     """Rasterise a closed polygon (x, y vertices in image coordinates) to its bbox and stamp.
 
-    A pixel is inside when its centre is (OpenCV ``fillPoly`` on the pixel grid).
+    A pixel is inside when its centre is (even-odd rule, scanline per pixel row), so a
+    rectangle from (0, 0) to (4, 4) covers exactly the 4×4 pixels under it.
+
+    Examples
+    --------
+    >>> polygon_mask([(0, 0), (4, 0), (4, 4), (0, 4)], (10, 10))[1].sum()
+    np.int64(16)
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[0] < 3 or pts.shape[1] != 2:
@@ -135,11 +141,22 @@ def polygon_mask(points, shape: tuple[int, int]):
     y1 = min(int(np.ceil(pts[:, 1].max())) + 1, h)
     if y0 >= y1 or x0 >= x1:
         return None, None
-    shift = 8  # fixed-point sub-pixel vertices; pixel centres at integer + 0.5
-    fixed = np.round((pts - [x0 + 0.5, y0 + 0.5]) * (1 << shift)).astype(np.int32)
-    canvas = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    cv2.fillPoly(canvas, [fixed], 1, lineType=cv2.LINE_8, shift=shift)
-    return (y0, y1, x0, x1), canvas.astype(bool)
+    ax, ay = pts[:, 0], pts[:, 1]
+    bx, by = np.roll(ax, -1), np.roll(ay, -1)
+    stamp = np.zeros((y1 - y0, x1 - x0), bool)
+    for i in range(y1 - y0):
+        yc = y0 + i + 0.5
+        crossing = (ay <= yc) != (by <= yc)
+        if not crossing.any():
+            continue
+        ca = np.flatnonzero(crossing)
+        xs = np.sort(ax[ca] + (yc - ay[ca]) * (bx[ca] - ax[ca]) / (by[ca] - ay[ca]))
+        # pixel j is inside a span [xl, xr) when its centre j + 0.5 is
+        starts = np.clip(np.ceil(xs[0::2] - 0.5).astype(np.int64) - x0, 0, x1 - x0)
+        stops = np.clip(np.ceil(xs[1::2] - 0.5).astype(np.int64) - x0, 0, x1 - x0)
+        for a, b in zip(starts, stops):
+            stamp[i, a:b] = True
+    return (y0, y1, x0, x1), stamp
 
 
 def similar_region(image: np.ndarray, x: float, y: float, tolerance: float) -> np.ndarray:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from psygnal import Signal
 from PySide6.QtGui import QUndoCommand, QUndoStack
+from shiboken6 import isValid
 
 from app.history import Command
 
@@ -36,8 +37,12 @@ class QtHistory:
 
     def __init__(self, stack: QUndoStack | None = None):
         self.stack = stack if stack is not None else QUndoStack()
-        self.stack.indexChanged.connect(lambda _i: self.changed.emit())
-        self.stack.cleanChanged.connect(lambda _c: self.changed.emit())
+        self.stack.indexChanged.connect(self._on_stack_changed)
+        self.stack.cleanChanged.connect(self._on_stack_changed)
+
+    def _on_stack_changed(self, *_args) -> None:
+        if isValid(self.stack):  # a QUndoStack being destroyed clears itself and signals
+            self.changed.emit()
 
     def push(self, command: Command, *, applied: bool = False) -> None:
         self.stack.push(_QtCommand(command, applied))
@@ -68,7 +73,7 @@ class QtHistory:
         self.changed.emit()
 
     def is_clean(self) -> bool:
-        return self.stack.isClean()
+        return self.stack.isClean() if isValid(self.stack) else True
 
     def clear(self) -> None:
         self.stack.clear()

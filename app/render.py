@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
-import cv2
 import numpy as np
 
 from app.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, robust_max, to_rgb32
@@ -77,7 +76,7 @@ class Tile:
     label: str
 
 
-@dataclass
+@dataclass(eq=False)
 class Frame:
     """A displayable frame.
 
@@ -273,7 +272,7 @@ class Renderer:
         h, w = target.shape
         k = comps.shape[0]
         n = max(rows, cols)  # the grid never exceeds the preview size in either direction
-        th, tw = max(1, h // n), max(1, w // n)
+        th, tw = -(-h // n), -(-w // n)
         canvas = np.full((rows * th, cols * tw), 0xFF202020, np.uint32)
         tiles = []
         inside = target[:, :, None]
@@ -282,7 +281,7 @@ class Renderer:
             if i - 1 >= d.outside_order:
                 outside = np.zeros_like(unreached)
             merged = np.where(inside, comps[i], outside) * np.float32(4.0**i)
-            small = cv2.resize(merged, (tw, th), interpolation=cv2.INTER_AREA) if (th, tw) != (h, w) else merged
+            small = area_average(merged, n)
             r, c = divmod(i, cols)
             canvas[r * th : (r + 1) * th, c * tw : (c + 1) * tw] = to_rgb32(np.ascontiguousarray(small), exposure=exposure)
             label = "R⁰L_d | L̄_d" if i == 0 else f"R{_sup(i)}L_d | C R{_sup(i - 1)}L_d"

@@ -256,7 +256,9 @@ class Job(QObject):
     def cancel(self) -> None:
         """Ask the job to stop at its next ``should_stop()``; also ends a pause."""
         self._stop.set()
-        self._run_gate.set()
+        if self.is_paused:
+            self._run_gate.set()
+            self.paused.emit(False)
 
     def pause(self) -> None:
         """Hold the job at its next ``should_stop()`` until :meth:`resume` or :meth:`cancel`."""
