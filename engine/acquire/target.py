@@ -77,6 +77,7 @@ def prepare_target(
     period: int = 8,
     shifts: int = 2,
     floor: float = 0.02,
+    consistency: float = 0.7,
     smooth: float = 0.0,
     photograph: np.ndarray | None = None,
 ) -> PreparedTarget:
@@ -101,6 +102,11 @@ def prepare_target(
     floor : float
         Pixels whose D is below ``floor`` times the target's median D (in any channel) are
         unreachable.
+    consistency : float
+        A pixel whose D (from the captures its projector pixel lit and left unlit, according
+        to the correspondence) is below this fraction of its correspondence-free
+        ``max − min`` has a wrong correspondence (lit and unlit captures got mixed) and is
+        unreachable. Noise biases ``max − min`` up by about 2σ, hence the margin.
     smooth : float
         Gaussian sigma (camera pixels) of the denoising of D; 0 keeps the raw estimate.
         ``D / photograph`` is the ratio of projector to scene irradiance — albedo and texture
@@ -122,7 +128,7 @@ def prepare_target(
     if not target.any():
         raise InputError("target is empty: paint the surface to recolor first")
     corr, filled = fill_correspondence(calibration.correspondence, target)
-    painted_valid = target & corr.valid
+    painted_valid = target & corr.valid & ~_conflicts(corr, target)
     if not painted_valid.any():
         raise InputError(
             "no pixel of the target has a projector correspondence: the projector does not reach it "
@@ -137,10 +143,14 @@ def prepare_target(
     n_plus = lit_full.sum(axis=0)[:, :, None]
     n_minus = unlit_full.sum(axis=0)[:, :, None]
     ok = painted_valid[:, :, None] & (n_plus > 0) & (n_minus > 0)
+    brightest = np.full(base.shape, -np.inf)  # correspondence-free max - min, to check it
+    darkest = np.full(base.shape, np.inf)
     for g, channels in enumerate(groups):
         label = "rgb"[channels[0]] if per_channel else "rgb"
         plus = np.zeros(base.shape, np.float64)
         minus = np.zeros_like(plus)
+        hi = np.full(base.shape, -np.inf)
+        lo = np.full(base.shape, np.inf)
         for i, pattern in enumerate(patterns):
             shown = np.zeros_like(pattern)
             shown[..., channels] = pattern[..., channels]
@@ -150,10 +160,16 @@ def prepare_target(
             light = cap - base
             plus += np.where(lit_full[i][:, :, None], light, 0)
             minus += np.where(unlit_full[i][:, :, None], light, 0)
+            np.maximum(hi, light, out=hi)
+            np.minimum(lo, light, out=lo)
         matrix[..., g] = np.where(ok, plus / np.maximum(n_plus, 1) - minus / np.maximum(n_minus, 1), 0)
+        for c in channels:
+            brightest[..., c], darkest[..., c] = hi[..., c], lo[..., c]
     direct = np.stack([matrix[..., c, c] for c in range(3)], -1) if per_channel else matrix[..., 0]
+    # a wrong correspondence mixes lit and unlit captures: its D falls far below max - min
+    consistent = (direct >= consistency * (brightest - darkest)).all(axis=-1)
     med = np.median(direct[painted_valid], axis=0)
-    usable = painted_valid & (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
+    usable = painted_valid & consistent & (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
     if not usable.any():
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
     if smooth > 0:
@@ -161,6 +177,34 @@ def prepare_target(
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
     return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix)
+
+
+def _conflicts(corr: Correspondence, target: np.ndarray, *, distance: float = 0.0) -> np.ndarray:
+    """Target pixels whose projector pixel is also decoded by a non-target pixel.
+
+    Emitting on such a projector pixel also lights the other surface — and strongly, since
+    ``I / D`` is large where the target is grazing and the other surface is often frontal —
+    or the target pixel's decode is wrong (targets are where interreflections, which corrupt
+    Gray code, are strong). Either way it cannot be re-emitted safely. ``distance`` tolerates
+    claims by non-target pixels that close in the camera image (0: none). Measured on the
+    offset-projector Cornell box (64×64, ideal): relative error 1870 % without the repairs of
+    the correspondence, 46 % with outlier rejection and a 2-pixel tolerance, 4.7 % with none.
+    """
+    hp, wp = corr.projector_resolution
+    other = corr.valid & ~target
+    owner_u = np.full((hp, wp), -1e9)
+    owner_v = np.full((hp, wp), -1e9)
+    vs, us = np.nonzero(other)
+    owner_u[corr.y[vs, us], corr.x[vs, us]] = us
+    owner_v[corr.y[vs, us], corr.x[vs, us]] = vs
+    mine = corr.valid & target
+    vt, ut = np.nonzero(mine)
+    du = owner_u[corr.y[vt, ut], corr.x[vt, ut]] - ut
+    dv = owner_v[corr.y[vt, ut], corr.x[vt, ut]] - vt
+    out = np.zeros_like(target)
+    out[vt, ut] = np.hypot(du, dv) > distance
+    out[vt, ut] &= owner_u[corr.y[vt, ut], corr.x[vt, ut]] > -1e8
+    return out
 
 
 def _smooth_ratio(direct: np.ndarray, photograph: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:

@@ -456,79 +456,104 @@ def _pair(pos: np.ndarray, neg: np.ndarray, thr, bit: np.ndarray, ok: np.ndarray
     ok &= diff >= thr
 
 
-def fill_correspondence(correspondence: Correspondence, target, *, radius: int = 4) -> tuple[Correspondence, np.ndarray]:
-    """Fill undecoded target pixels from a local plane fit of their decoded neighbours.
+def fill_correspondence(
+    correspondence: Correspondence, target, *, radius: int = 4, tolerance: float = 2.0
+) -> tuple[Correspondence, np.ndarray]:
+    """Repair a target's correspondences: drop outliers, fill holes from local plane fits.
 
-    Gray code fails where interreflections cancel a bit's contrast (concave corners) or at
-    grazing angles, yet on a smooth surface the projector position is a smooth function of
-    the camera position. Each undecoded target pixel with at least six decoded target pixels
-    within ``radius`` gets the rounded value, at its position, of the least-squares plane
-    ``x = a + b u + c v`` (and the same for ``y``) through them.
+    Gray code fails where interreflections cancel or flip a bit (concave corners) or at
+    grazing angles, yet on a smooth surface the projector position is a smooth function of the
+    camera position. First, each decoded target pixel is compared with the least-squares plane
+    ``x = a + b u + c v`` (and ``y``) through its decoded target neighbours within ``radius``,
+    itself left out; one further than ``tolerance`` projector pixels is a wrong decode. Then
+    each undecoded or rejected target pixel with at least six good neighbours gets the rounded
+    value of their plane at its position.
 
     Parameters
     ----------
     correspondence : Correspondence
     target : (H, W) bool
-        Only pixels of the target are filled, only from pixels of the target (one surface).
+        Only pixels of the target are checked and filled, only from pixels of the target.
     radius : int
         Half-size of the square neighbourhood, in camera pixels.
+    tolerance : float
+        Largest accepted distance, in projector pixels, between a decoded position and its
+        neighbours' plane.
 
     Returns
     -------
     filled : Correspondence
-        Filled pixels are marked DECODED.
+        Repaired pixels are marked DECODED; rejected ones that could not be filled, LOW_CONTRAST.
     mask : (H, W) bool
-        The pixels that were filled.
+        The pixels whose projector position was interpolated.
 
     Examples
     --------
     >>> c = Correspondence.identity((5, 5))
     >>> status = c.status.copy()
     >>> status[2, 2] = PixelStatus.LOW_CONTRAST
-    >>> hole = Correspondence(c.x, c.y, status, (5, 5))
-    >>> f, m = fill_correspondence(hole, np.ones((5, 5), bool))
-    >>> int(f.x[2, 2]), int(f.y[2, 2]), int(m.sum())
-    (2, 2, 1)
+    >>> x = c.x.copy()
+    >>> x[1, 1] = 4  # a wrong decode
+    >>> f, m = fill_correspondence(Correspondence(x, c.y, status, (5, 5)), np.ones((5, 5), bool))
+    >>> int(f.x[2, 2]), int(f.x[1, 1]), int(m.sum())
+    (2, 1, 2)
     """
-    import cv2
-
     target = np.asarray(target, bool)
     if target.shape != correspondence.camera_resolution:
         raise InputError(f"target must have shape {correspondence.camera_resolution}, got {target.shape}")
     good = correspondence.valid & target
-    holes = target & ~correspondence.valid
-    if not holes.any() or not good.any():
-        return correspondence, np.zeros_like(holes)
-    h, w = target.shape
+    if not good.any():
+        return correspondence, np.zeros_like(target)
+    x = correspondence.x.astype(np.float64)
+    y = correspondence.y.astype(np.float64)
+    px, py, ok = _plane_fit(good, (x, y), radius, leave_one_out=True)
+    outlier = good & ok & (np.hypot(px - x, py - y) > tolerance)
+    good &= ~outlier
+    holes = target & ~good
+    px, py, ok = _plane_fit(good, (x, y), radius, leave_one_out=False)
+    hp, wp = correspondence.projector_resolution
+    fx, fy = np.rint(px), np.rint(py)
+    fill = holes & ok & (fx >= 0) & (fx < wp) & (fy >= 0) & (fy < hp)
+    out_x = np.where(fill, fx, correspondence.x).astype(np.int32)
+    out_y = np.where(fill, fy, correspondence.y).astype(np.int32)
+    status = correspondence.status.copy()
+    status[outlier] = PixelStatus.LOW_CONTRAST
+    status[fill] = PixelStatus.DECODED
+    decoded = status == PixelStatus.DECODED
+    out_x[~decoded] = -1
+    out_y[~decoded] = -1
+    return Correspondence(out_x, out_y, status, correspondence.projector_resolution), fill
+
+
+def _plane_fit(good: np.ndarray, values, radius: int, *, leave_one_out: bool):
+    """Per pixel, the local least-squares plane through ``values`` at ``good`` neighbours.
+
+    Returns the planes' values at each pixel and where the fit is determined (at least six
+    neighbours, not collinear).
+    """
+    import cv2
+
+    h, w = good.shape
     v, u = np.indices((h, w), dtype=np.float64)
     wgt = good.astype(np.float64)
     k = (2 * radius + 1, 2 * radius + 1)
 
     def box(a):
-        return cv2.boxFilter(a, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        total = cv2.boxFilter(a, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        return total - a if leave_one_out else total
 
-    # normal equations of the local plane fit, centred on each pixel for conditioning
+    # coordinates relative to each pixel keep the normal equations well conditioned
     s1, su, sv = box(wgt), box(wgt * u), box(wgt * v)
     suu, suv, svv = box(wgt * u * u), box(wgt * u * v), box(wgt * v * v)
     ata = np.stack([np.stack([s1, su, sv], -1), np.stack([su, suu, suv], -1), np.stack([sv, suv, svv], -1)], -2)
-    out_x, out_y = correspondence.x.copy(), correspondence.y.copy()
-    status = correspondence.status.copy()
-    hy, hx = np.nonzero(holes & (s1 >= 6))
-    if hy.size:
-        a = ata[hy, hx]
-        det_ok = np.abs(np.linalg.det(a)) > 1e-9 * np.maximum(s1[hy, hx], 1) ** 3
-        pos = np.stack([np.ones(hy.size), hx.astype(float), hy.astype(float)], -1)
-        for src, dst in ((correspondence.x, out_x), (correspondence.y, out_y)):
-            val = np.where(good, src, 0).astype(np.float64)
-            rhs = np.stack([box(wgt * val), box(wgt * val * u), box(wgt * val * v)], -1)[hy, hx]
-            coef = np.linalg.solve(np.where(det_ok[:, None, None], a, np.eye(3)), rhs[..., None])[..., 0]
-            dst[hy[det_ok], hx[det_ok]] = np.rint((coef * pos).sum(-1))[det_ok].astype(np.int32)
-        hp, wp = correspondence.projector_resolution
-        keep = det_ok & (out_x[hy, hx] >= 0) & (out_x[hy, hx] < wp) & (out_y[hy, hx] >= 0) & (out_y[hy, hx] < hp)
-        status[hy[keep], hx[keep]] = PixelStatus.DECODED
-        hy, hx = hy[keep], hx[keep]
-    filled = np.zeros_like(holes)
-    filled[hy, hx] = True
-    out_x[~(status == PixelStatus.DECODED)] = -1
-    out_y[~(status == PixelStatus.DECODED)] = -1
-    return Correspondence(out_x, out_y, status, correspondence.projector_resolution), filled
+    det = np.linalg.det(ata)
+    ok = (s1 >= 6) & (np.abs(det) > 1e-9 * np.maximum(s1, 1) ** 3)
+    safe = np.where(ok[..., None, None], ata, np.eye(3))
+    pos = np.stack([np.ones((h, w)), u, v], -1)
+    out = []
+    for val in values:
+        val = np.where(good, val, 0.0)
+        rhs = np.stack([box(wgt * val), box(wgt * val * u), box(wgt * val * v)], -1)
+        coef = np.linalg.solve(safe, rhs[..., None])[..., 0]
+        out.append((coef * pos).sum(-1))
+    return out[0], out[1], ok

@@ -159,7 +159,22 @@ def projector_footprint(correspondence: Correspondence, *, target=None, radius: 
     corr = _check_correspondence(correspondence)
     hit = projector_to_camera_map(corr, target=target).count > 0
     r = estimate_hole_radius(corr, target=target) if radius is None else _check_radius(radius)
-    return _close(hit, r)
+    return hit | (_close(hit, r) & ~_lights_elsewhere(corr, target))
+
+
+def _lights_elsewhere(corr: Correspondence, target) -> np.ndarray:
+    """(Hp, Wp) bool: projector pixels decoded by a camera pixel outside ``target``.
+
+    Such a pixel is known to light another surface: filling a hole of the target's footprint
+    with it would spill the target's (often strong, ``I / D`` on a grazing surface) light there.
+    """
+    hp, wp = corr.projector_resolution
+    if target is None:
+        return np.zeros((hp, wp), bool)
+    other = corr.valid & ~check_mask("target", target, corr.camera_resolution)
+    out = np.zeros((hp, wp), bool)
+    out[corr.y[other], corr.x[other]] = True
+    return out
 
 
 def _check_radius(radius) -> int:
@@ -250,7 +265,7 @@ def warp_to_projector(
             out[..., c] = np.where(hit, s / count, 0.0)
     if fill_holes and hit.any():
         r = estimate_hole_radius(corr, target=target) if hole_radius is None else _check_radius(hole_radius)
-        holes = _close(hit, r) & ~hit
+        holes = _close(hit, r) & ~hit & ~_lights_elsewhere(corr, target)
         if r > 0 and holes.any():
             size = (2 * r + 1, 2 * r + 1)
             w = cv2.boxFilter(hit.astype(np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
