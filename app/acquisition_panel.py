@@ -28,7 +28,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.rig_views import ProgressEta, ThumbnailStrip, rig_lock, worker_rig
+from app.rig_views import ProgressEta, ThumbnailStrip, finish_job, rig_lock, worker_rig
 from app.worker import Job, UiCaller
 from engine.acquire import Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
@@ -143,6 +143,7 @@ class AcquisitionPanel(QWidget):
         self.targets: list[tuple[str, np.ndarray]] = []
         self.fixed_kappa: list = []
         self.job: Job | None = None
+        self._cancelling = False
         self.result = None
 
         self.order = QSpinBox(minimum=1, maximum=8, value=4)
@@ -330,7 +331,7 @@ class AcquisitionPanel(QWidget):
         job = Job(_acquire, self.rig, self.session, list(self.targets), int(self.order.value()),
                   caller=self.ui, fixed_kappa=[k.copy() for k in self.fixed_kappa],
                   settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
-                  on_capture=on_capture, name="Acquiring", synchronous=self.synchronous, parent=self)
+                  on_capture=on_capture, name="Acquiring", synchronous=self.synchronous)
         job.progress.connect(self.eta.update_progress)
         job.paused.connect(self._on_paused)
         job.finished.connect(self._on_finished)
@@ -338,15 +339,18 @@ class AcquisitionPanel(QWidget):
         job.cancelled.connect(self._on_cancelled)
         job.ended.connect(lambda: self._on_ended(job))
         self.job = job
+        self._cancelling = False
         self._note(f"Acquiring; {resumed} captures already in the session are reused." if resumed else "Acquiring…")
-        self._update()
         self.busy_changed.emit(True)
         self.started.emit(job)
         job.start()
+        if self.busy:  # threaded: lock the controls until it ends (a synchronous run has ended already)
+            self._update()
         return job
 
     def pause(self) -> None:
-        if self.busy:
+        """Hold the run before its next capture (the projector keeps its pattern)."""
+        if self.busy and not self._cancelling:  # a pause after a cancel would hold the worker forever
             self.job.pause()
 
     def resume(self) -> None:
@@ -357,11 +361,21 @@ class AcquisitionPanel(QWidget):
     def cancel(self) -> None:
         """Stop the run at the next capture; what was captured stays in the session."""
         if self.busy:
+            self._cancelling = True
             self.job.cancel()
 
-    def shutdown(self) -> None:
-        """Cancel any run (call when the window closes; captures taken are kept)."""
-        self.cancel()
+    def shutdown(self, *, timeout: float = 15.0) -> bool:
+        """Cancel any run and wait for it to stop (captures taken are kept); True once idle.
+
+        Called by :meth:`closeEvent`; call it before deleting a panel that was never shown.
+        """
+        if self.busy:
+            self._cancelling = True
+        return finish_job(self.job, timeout=timeout)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        self.shutdown()
+        super().closeEvent(event)
 
     # ------------------------------------------------------------------ job signals (UI thread)
     def _on_thumbnail(self, name: str, rgb) -> None:

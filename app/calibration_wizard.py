@@ -52,7 +52,7 @@ from PySide6.QtWidgets import (
 )
 
 import devices
-from app.rig_views import CoverageMap, LiveView, ProgressEta, ResponsePlot, rig_lock, worker_rig
+from app.rig_views import CoverageMap, LiveView, ProgressEta, ResponsePlot, finish_job, rig_lock, worker_rig
 from app.worker import Job, LatestWorker, UiCaller
 from engine.acquire import calibration_budget
 from engine.calibrate import exposure_report
@@ -392,7 +392,8 @@ class ExposurePage(QWizardPage):
     def start_live(self) -> None:
         self.stop_live()
         self._shown = None
-        self.worker = LatestWorker(self._grab, synchronous=self.w.synchronous, parent=self)
+        # No Qt parent: the worker's thread keeps it alive until a grab in flight has returned.
+        self.worker = LatestWorker(self._grab, synchronous=self.w.synchronous)
         self.worker.done.connect(self._on_frame)
         self.worker.failed.connect(self._on_grab_failed)
         self.timer.start(self.w.live_interval_ms)
@@ -580,8 +581,8 @@ class CalibrationPage(QWizardPage):
 
     def _on_pause(self, on: bool) -> None:
         job = self.w.job
-        if job is None or not job.running:
-            return
+        if job is None or not job.running or (on and self.w.cancel_requested):
+            return  # a pause after a cancel would hold the worker forever
         job.pause() if on else job.resume()
 
     def _on_paused(self, on: bool) -> None:
@@ -592,6 +593,7 @@ class CalibrationPage(QWizardPage):
 
     def _on_cancel(self) -> None:
         if self.w.job is not None:
+            self.w.cancel_requested = True
             self.w.job.cancel()
 
     def on_finished(self, calibration) -> None:
@@ -748,6 +750,7 @@ class CalibrationWizard(QWizard):
         self.failure: BaseException | None = None
         self.result_session: Session | None = None
         self.job: Job | None = None
+        self.cancel_requested = False
         self._opened: tuple | None = None if rig is None else (rig.name, ())
         self._pending_close = False
 
@@ -794,7 +797,7 @@ class CalibrationWizard(QWizard):
             page.status.setText(f"Opening {_esc(name)}…")
             # Hardware backends open a Qt projector window, which only the UI thread may create.
             on_ui = self.synchronous or name.partition(":")[0] not in _NO_SCREEN_BACKENDS
-            job = Job(_open_rig, name, options, name=f"Opening {name}", synchronous=on_ui, parent=self)
+            job = Job(_open_rig, name, options, name=f"Opening {name}", synchronous=on_ui)
             job.progress.connect(page.eta.update_progress)
 
             def opened(rig):
@@ -830,10 +833,11 @@ class CalibrationWizard(QWizard):
 
     def _run(self, job: Job) -> None:
         self.job = job
+        self.cancel_requested = False
         self.job_started.emit(job)
+        job.start()
         for page in (self.projector_page, self.calibration_page):
             page.completeChanged.emit()
-        job.start()
 
     def _job_ended(self, job: Job) -> None:
         if self.job is job:
@@ -853,7 +857,7 @@ class CalibrationWizard(QWizard):
         self.failure = None
         page = self.calibration_page
         job = Job(_calibrate, self.rig, self.session, levels=levels, crosstalk=crosstalk, caller=self.ui,
-                  name="Calibrating", synchronous=self.synchronous, parent=self)
+                  name="Calibrating", synchronous=self.synchronous)
         job.progress.connect(page.eta.update_progress)
         job.paused.connect(page._on_paused)
         job.finished.connect(self._on_calibrated)
@@ -970,8 +974,9 @@ class CalibrationWizard(QWizard):
     def done(self, result: int) -> None:
         self.exposure_page.stop_live()
         accepted = result == QWizard.DialogCode.Accepted and self.calibration is not None
-        if self.busy:
-            self.job.cancel()
+        if self.busy:  # stop the worker before the rig closes and the pages go
+            self.cancel_requested = True
+            finish_job(self.job)
         if accepted:
             self.result_session = self.session
         if not (accepted and self.keep_rig):

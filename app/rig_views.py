@@ -23,7 +23,7 @@ import weakref
 from typing import Callable
 
 import numpy as np
-from PySide6.QtCore import QObject, QPointF, QRectF, QSize, Qt
+from PySide6.QtCore import QCoreApplication, QEventLoop, QObject, QPointF, QRectF, QSize, Qt
 from PySide6.QtGui import QColor, QFont, QIcon, QImage, QPainter, QPainterPath, QPen, QPixmap
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -50,6 +50,7 @@ __all__ = [
     "ThumbnailStrip",
     "display_rgb",
     "downscale",
+    "finish_job",
     "format_duration",
     "rgb_to_qimage",
     "rig_lock",
@@ -194,6 +195,27 @@ def rig_lock(rig) -> threading.Lock:
         if lock is None:
             lock = _LOCKS[rig] = threading.Lock()
         return lock
+
+
+def finish_job(job, *, timeout: float = 15.0) -> bool:
+    """Cancel ``job`` and wait until it has ended, still serving the UI thread meanwhile.
+
+    Events are processed while waiting, so a worker blocked on a UI-thread call (a projector
+    frame) can finish; the job stops at its next ``should_stop()`` (the next capture). Call it
+    before a widget that owns a job is closed, so no worker outlives the objects it reports to.
+
+    Returns
+    -------
+    bool
+        True if the job is no longer running (False after ``timeout`` seconds).
+    """
+    if job is None or not job.running:
+        return True
+    job.cancel()
+    deadline = time.monotonic() + float(timeout)
+    while job.running and time.monotonic() < deadline:
+        QCoreApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 50)
+    return not job.running
 
 
 class _WorkerRig:
