@@ -1,0 +1,155 @@
+"""Small helpers shared by the real camera backends: bounded device calls and rig assembly.
+
+Vendor libraries block inside C calls that no Python timeout can interrupt. :func:`call_with_timeout`
+runs such a call on a daemon thread and gives up waiting after a deadline, so the caller gets a
+:class:`~engine.errors.DeviceError` instead of a hang. The abandoned call keeps running; a backend
+must refuse further calls until it finishes (see :class:`Watchdog`).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, Callable
+
+from engine.errors import DeviceError, InputError
+
+
+class Watchdog:
+    """Runs device calls with a deadline and remembers a call that never came back.
+
+    Parameters
+    ----------
+    device : str
+        Plain name of the device, used in messages ("camera", "Canon EOS 80D").
+
+    Notes
+    -----
+    After a timeout the abandoned call is still inside the vendor library; running another call
+    on the same handle could corrupt its state, so every later call raises until the abandoned
+    one returns (then :attr:`recovered` is True once, so the backend can reset its session).
+
+    Examples
+    --------
+    >>> dog = Watchdog("camera")
+    >>> dog.call(lambda x: x + 1, 41, timeout=1.0, what="add")
+    42
+    """
+
+    def __init__(self, device: str):
+        self.device = device
+        self._hung: threading.Thread | None = None
+        self._hung_what = ""
+        self.recovered = False
+
+    def check(self) -> None:
+        """Raise if an earlier call is still stuck in the device library."""
+        if self._hung is None:
+            return
+        if self._hung.is_alive():
+            raise DeviceError(
+                f"the {self.device} has not answered an earlier {self._hung_what} yet; "
+                "unplug and reconnect it (or switch it off and on), then open the rig again"
+            )
+        self._hung = None
+        self.recovered = True
+
+    def call(self, fn: Callable[..., Any], *args: Any, timeout: float, what: str) -> Any:
+        """Call ``fn(*args)`` and return its result, or raise DeviceError after ``timeout`` s.
+
+        Exceptions raised by ``fn`` propagate unchanged (the backend maps vendor errors).
+        """
+        self.check()
+        box: dict[str, Any] = {}
+        done = threading.Event()
+
+        def run() -> None:
+            try:
+                box["value"] = fn(*args)
+            except BaseException as exc:  # handed to the caller below
+                box["error"] = exc
+            finally:
+                done.set()
+
+        worker = threading.Thread(target=run, daemon=True, name=f"albedit-{what}")
+        worker.start()
+        if not done.wait(timeout):
+            self._hung, self._hung_what = worker, what
+            raise DeviceError(
+                f"the {self.device} did not finish {what} within {timeout:g} s; "
+                "check the cable and that the device is switched on and not asleep"
+            )
+        if "error" in box:
+            raise box["error"]
+        return box.get("value")
+
+
+def call_with_timeout(fn: Callable[..., Any], *args: Any, timeout: float, what: str, device: str = "device") -> Any:
+    """Call ``fn(*args)`` on a daemon thread; raise DeviceError if it takes longer than ``timeout`` s.
+
+    A one-shot :class:`Watchdog`; use a Watchdog per device when calls share a handle.
+
+    Examples
+    --------
+    >>> call_with_timeout(sum, [1, 2], timeout=1.0, what="adding")
+    3
+    """
+    return Watchdog(device).call(fn, *args, timeout=timeout, what=what)
+
+
+def check_positive(name: str, value, *, allow_none: bool = False) -> float | None:
+    """Return ``value`` as a float if it is a finite number > 0 (an exposure, a timeout)."""
+    if value is None and allow_none:
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a positive number, got {value!r}") from None
+    if not v > 0 or v == float("inf"):
+        raise InputError(f"{name} must be a positive finite number, got {value!r}")
+    return v
+
+
+def assemble_rig(name: str, camera, projector=None, **projector_options):
+    """Pair ``camera`` with a projector into a :class:`devices.base.Rig`.
+
+    Parameters
+    ----------
+    name : str
+        Rig name recorded in sessions, e.g. ``"opencv:0"``.
+    camera : devices.base.Camera
+        An open camera; closed again if the projector cannot be opened.
+    projector : str or Projector or None
+        ``None`` (a full-screen window on the second screen), ``"qtscreen:NAME_OR_INDEX"``, or an
+        object implementing the Projector protocol.
+    **projector_options
+        Passed to :func:`devices.qtscreen.open_projector` (``settle``, ``timeout``).
+
+    Notes
+    -----
+    When the camera has ``mark_stale()`` and the projector ``add_shown_callback()``, the camera is
+    told about each new projector frame so it drops buffers queued before the change.
+    """
+    try:
+        if projector is None or isinstance(projector, str):
+            from devices import qtscreen  # the only Qt module in devices/, imported when needed
+
+            proj = qtscreen.projector_from_spec(projector, **projector_options)
+        else:
+            if projector_options:
+                raise InputError(
+                    f"projector options {sorted(projector_options)} only apply to a qtscreen projector, "
+                    f"not to the given {type(projector).__name__}"
+                )
+            proj = projector
+    except BaseException:
+        close = getattr(camera, "close", None)
+        if close is not None:
+            close()
+        raise
+    mark_stale = getattr(camera, "mark_stale", None)
+    add_callback = getattr(proj, "add_shown_callback", None)
+    if mark_stale is not None and add_callback is not None:
+        add_callback(mark_stale)
+    from devices.base import Rig
+
+    return Rig(name, camera, proj)

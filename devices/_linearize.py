@@ -1,0 +1,329 @@
+"""From what a camera hands over to linear radiance: response curves, linear RAW decoding, HDR merge.
+
+A camera backend never passes gamma-encoded values on (DESIGN.md, "Devices"). Webcams and
+8-bit files are linearised through a :class:`ResponseCurve` (supplied, or measured with OpenCV's
+Debevec calibration); RAW files are decoded by LibRaw without gamma, auto-brightening or
+white balance; and a bracket of exposures is merged into one linear frame.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.errors import DeviceError, InputError
+
+#: code values at or above this fraction of full scale count as clipped (254/255)
+SATURATION_FRACTION = 254.0 / 255.0
+
+
+class ResponseCurve:
+    """A camera response: code value -> linear relative radiance, per channel.
+
+    Parameters
+    ----------
+    lut : (levels,) or (levels, 3) array_like of float
+        Linear radiance for each code value 0 .. levels-1; non-decreasing, finite, >= 0.
+        One column is used for all three channels.
+    name : str
+        How it was obtained, recorded in frame metadata ("srgb", "gamma 2.2", "debevec", ...).
+
+    Notes
+    -----
+    Codes from a source of a different bit depth are mapped by their fraction of full scale and
+    interpolated linearly in the table.
+
+    Examples
+    --------
+    >>> curve = ResponseCurve.from_gamma(2.0, levels=256)
+    >>> codes = np.array([[[0, 128, 255]]], np.uint8)
+    >>> np.round(curve.apply(codes), 4)
+    array([[[0.   , 0.252, 1.   ]]], dtype=float32)
+    """
+
+    def __init__(self, lut, *, name: str = "lut"):
+        table = np.asarray(lut, dtype=np.float64)
+        if table.ndim == 1:
+            table = np.repeat(table[:, None], 3, axis=1)
+        if table.ndim != 2 or table.shape[1] != 3 or table.shape[0] < 2:
+            raise InputError(f"response lut must have shape (levels,) or (levels, 3) with levels >= 2, got {np.shape(lut)}")
+        if not np.all(np.isfinite(table)) or np.any(table < 0):
+            raise InputError("response lut must be finite and non-negative (linear radiance per code value)")
+        if np.any(np.diff(table, axis=0) < 0):
+            raise InputError("response lut must be non-decreasing in the code value; make it monotonic first")
+        if table[-1].max() <= 0:
+            raise InputError("response lut is zero everywhere; expected radiance rising with the code value")
+        self.lut = table / table[-1].max()  # 1.0 = the top code of the brightest channel
+        self.name = str(name)
+
+    @property
+    def levels(self) -> int:
+        """Number of code values the table covers (256 for 8-bit)."""
+        return int(self.lut.shape[0])
+
+    @classmethod
+    def from_gamma(cls, gamma: float, *, levels: int = 256) -> "ResponseCurve":
+        """A power law: radiance = (code / (levels-1)) ** gamma."""
+        g = float(gamma)
+        if not (np.isfinite(g) and g > 0):
+            raise InputError(f"gamma must be a positive number, got {gamma!r}")
+        x = np.linspace(0.0, 1.0, int(levels))
+        return cls(x**g, name=f"gamma {g:g}")
+
+    @classmethod
+    def srgb(cls, *, levels: int = 256) -> "ResponseCurve":
+        """The sRGB transfer function (IEC 61966-2-1), the usual webcam encoding."""
+        x = np.linspace(0.0, 1.0, int(levels))
+        lin = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+        return cls(lin, name="srgb")
+
+    @classmethod
+    def linear(cls, *, levels: int = 65536) -> "ResponseCurve":
+        """Codes already proportional to radiance (RAW-like 16-bit data)."""
+        return cls(np.linspace(0.0, 1.0, int(levels)), name="linear")
+
+    def apply(self, codes: np.ndarray) -> np.ndarray:
+        """Linearise integer codes ``(H, W, 3)`` to float32 relative radiance (1.0 = top code).
+
+        Raises
+        ------
+        InputError
+            ``codes`` is not an unsigned integer (H, W, 3) array.
+        """
+        codes = np.asarray(codes)
+        if codes.dtype.kind != "u" or codes.ndim != 3 or codes.shape[2] != 3:
+            raise InputError(f"codes must be an unsigned-integer (H, W, 3) image, got {codes.dtype} {codes.shape}")
+        full = np.iinfo(codes.dtype).max
+        if full + 1 == self.levels:
+            out = self.lut[codes, np.arange(3)]
+        else:  # another bit depth: map by fraction of full scale
+            grid = np.linspace(0.0, 1.0, self.levels)
+            frac = codes.astype(np.float64) / full
+            out = np.stack([np.interp(frac[..., c], grid, self.lut[:, c]) for c in range(3)], axis=-1)
+        return out.astype(np.float32)
+
+    def __repr__(self) -> str:
+        return f"ResponseCurve({self.name!r}, levels={self.levels})"
+
+
+def response_curve(spec, *, levels: int) -> ResponseCurve:
+    """Build a :class:`ResponseCurve` from a user option.
+
+    Parameters
+    ----------
+    spec : ResponseCurve, "srgb", "linear", float gamma, "gamma:2.2", or a LUT array
+        What the user passed as ``response=``.
+    levels : int
+        Code values of the source (256 for 8-bit, 65536 for 16-bit); used by named curves.
+
+    Examples
+    --------
+    >>> response_curve("gamma:2.2", levels=256).name
+    'gamma 2.2'
+    >>> response_curve(1.8, levels=1024).levels
+    1024
+    """
+    if isinstance(spec, ResponseCurve):
+        return spec
+    if isinstance(spec, str):
+        s = spec.strip().lower()
+        if s == "srgb":
+            return ResponseCurve.srgb(levels=levels)
+        if s == "linear":
+            return ResponseCurve.linear(levels=levels)
+        if s.startswith("gamma"):
+            try:
+                return ResponseCurve.from_gamma(float(s[5:].lstrip(":= ")), levels=levels)
+            except ValueError:
+                pass
+        raise InputError(f"response must be 'srgb', 'linear', 'gamma:G', a number (gamma) or a LUT array, got {spec!r}")
+    if isinstance(spec, (int, float, np.integer, np.floating)) and not isinstance(spec, bool):
+        return ResponseCurve.from_gamma(float(spec), levels=levels)
+    if spec is None:
+        raise InputError("response must be given (e.g. 'srgb', 'linear' or a gamma value), got None")
+    return ResponseCurve(spec)
+
+
+def calibrate_response(images, exposures, *, samples: int = 70, smoothness: float = 10.0) -> ResponseCurve:
+    """Measure an 8-bit camera response from a bracketed set, with OpenCV's Debevec method.
+
+    Parameters
+    ----------
+    images : sequence of (H, W, 3) uint8
+        The same static scene at different exposures (at least 2; 5+ spanning 8+ stops is better).
+    exposures : sequence of float
+        Exposure time of each image in seconds.
+    samples : int
+        Pixel locations sampled by the solver (``cv2.createCalibrateDebevec``).
+    smoothness : float
+        Weight of the smoothness term (OpenCV's ``lambda``).
+
+    Returns
+    -------
+    ResponseCurve
+        ``name="debevec"``; each channel fixed at its own mid code (Debevec's g(128) = 0), so the
+        three channels' relative scale (white balance) is not measured.
+
+    Raises
+    ------
+    InputError
+        Fewer than two images, shapes differ, not uint8, or exposures not positive.
+
+    References
+    ----------
+    P. E. Debevec and J. Malik, "Recovering high dynamic range radiance maps from photographs",
+    SIGGRAPH 1997.
+    """
+    import cv2
+
+    imgs = [np.ascontiguousarray(im) for im in images]
+    times = np.asarray(exposures, dtype=np.float32)
+    if len(imgs) < 2 or times.shape != (len(imgs),):
+        raise InputError(f"need at least 2 images and one exposure per image, got {len(imgs)} images and {times.shape} exposures")
+    if any(im.dtype != np.uint8 or im.ndim != 3 or im.shape != imgs[0].shape or im.shape[2] != 3 for im in imgs):
+        raise InputError(f"images must all be uint8 (H, W, 3) of one shape, got {[(im.dtype.name, im.shape) for im in imgs]}")
+    if not np.all(np.isfinite(times)) or np.any(times <= 0):
+        raise InputError(f"exposures must be positive seconds, got {times.tolist()}")
+    cal = cv2.createCalibrateDebevec(samples=int(samples), lambda_=float(smoothness), random=False)
+    resp = cal.process(imgs, times).reshape(256, 3).astype(np.float64)
+    resp = np.maximum.accumulate(np.maximum(resp, 0.0), axis=0)
+    return ResponseCurve(resp, name="debevec")
+
+
+# --------------------------------------------------------------------------------------- RAW
+
+RAW_EXTENSIONS = frozenset(
+    ".3fr .arw .cr2 .cr3 .crw .dcr .dng .erf .iiq .k25 .kdc .mef .mos .mrw .nef .nrw .orf .pef "
+    ".raf .raw .rw2 .rwl .sr2 .srf .srw .x3f".split()
+)
+
+
+@dataclass(frozen=True)
+class RawDecode:
+    """A RAW file decoded linearly.
+
+    Attributes
+    ----------
+    image : (H, W, 3) float32
+        Black level removed, 1.0 = white level; camera colour space, no white balance.
+    saturated : (H, W) bool
+        Pixels whose photosite (or a neighbour it was interpolated from) reached the white level.
+    black_level : float
+        Mean black level removed, in raw units.
+    white_level : float
+        The sensor's clipping level, in raw units.
+    """
+
+    image: np.ndarray
+    saturated: np.ndarray
+    black_level: float
+    white_level: float
+
+
+def decode_raw(source: bytes | str | os.PathLike) -> RawDecode:
+    """Decode a RAW file linearly with rawpy (LibRaw).
+
+    Parameters
+    ----------
+    source : bytes or path
+        The file's bytes (as downloaded from a camera) or its path.
+
+    Returns
+    -------
+    RawDecode
+
+    Raises
+    ------
+    DeviceError
+        LibRaw cannot read the data (corrupt, truncated or unsupported file).
+
+    Notes
+    -----
+    ``postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, output_color=raw,
+    user_wb=[1, 1, 1, 1], adjust_maximum_thr=0.0, user_flip=0)``: ``adjust_maximum_thr`` must be
+    0, or LibRaw rescales each frame by its own maximum and two captures stop being comparable.
+    Black and white level come from the file.
+    """
+    import rawpy
+
+    data = io.BytesIO(bytes(source)) if isinstance(source, (bytes, bytearray, memoryview)) else os.fspath(source)
+    try:
+        with rawpy.imread(data) as raw:
+            mosaic = raw.raw_image_visible.copy()
+            white = float(raw.white_level)
+            black = float(np.mean(raw.black_level_per_channel))
+            rgb = raw.postprocess(
+                gamma=(1, 1),
+                no_auto_bright=True,
+                output_bps=16,
+                output_color=rawpy.ColorSpace.raw,
+                user_wb=[1.0, 1.0, 1.0, 1.0],
+                adjust_maximum_thr=0.0,
+                user_flip=0,
+            )
+    except (rawpy.LibRawError, OSError, ValueError) as exc:
+        raise DeviceError(f"could not decode the RAW data: {exc}") from None
+    image = rgb.astype(np.float32) / np.float32(65535.0)
+    saturated = np.any(rgb >= 65535, axis=2)
+    if mosaic.shape == rgb.shape[:2]:
+        clipped = mosaic >= white
+        if clipped.any():  # demosaicing spreads a clipped photosite to its 3x3 neighbours
+            pad = np.pad(clipped, 1)
+            grown = np.zeros_like(clipped)
+            for dy in range(3):
+                for dx in range(3):
+                    grown |= pad[dy : dy + clipped.shape[0], dx : dx + clipped.shape[1]]
+            saturated |= grown
+    return RawDecode(image=image, saturated=saturated, black_level=black, white_level=white)
+
+
+# --------------------------------------------------------------------------------------- HDR
+
+
+def merge_exposures(images, saturated, exposures) -> tuple[np.ndarray, np.ndarray]:
+    """Merge a bracket of linear radiance images into one, ignoring clipped pixels.
+
+    Parameters
+    ----------
+    images : sequence of (H, W, 3) float
+        Linear radiance, each already divided by its own exposure (so unclipped pixels agree).
+    saturated : sequence of (H, W) bool
+        Clipped pixels of each image.
+    exposures : sequence of float
+        Exposure times in seconds; the weight of an unclipped pixel (longer = less noise).
+
+    Returns
+    -------
+    image : (H, W, 3) float32
+        Exposure-weighted mean over the images where the pixel is not clipped; where it is clipped
+        in all of them, the shortest exposure's value (a lower bound).
+    saturated : (H, W) bool
+        Pixels clipped in every image.
+
+    Examples
+    --------
+    >>> a = np.full((1, 2, 3), 2.0, np.float32); b = np.full((1, 2, 3), 4.0, np.float32)
+    >>> img, sat = merge_exposures([a, b], [np.array([[True, False]]), np.zeros((1, 2), bool)], [1.0, 0.25])
+    >>> img[0, :, 0].tolist(), sat.tolist()
+    ([4.0, 2.4000000953674316], [[False, False]])
+    """
+    ims = [np.asarray(im, dtype=np.float32) for im in images]
+    sats = [np.asarray(s, dtype=bool) for s in saturated]
+    t = np.asarray(exposures, dtype=np.float64)
+    if not (len(ims) == len(sats) == t.size >= 1):
+        raise InputError(f"need one saturation mask and one exposure per image, got {len(ims)}, {len(sats)}, {t.size}")
+    if any(im.shape != ims[0].shape for im in ims) or any(s.shape != ims[0].shape[:2] for s in sats):
+        raise InputError("bracketed images and masks must all have the same shape")
+    num = np.zeros(ims[0].shape, np.float64)
+    den = np.zeros(ims[0].shape[:2], np.float64)
+    for im, s, ti in zip(ims, sats, t):
+        w = np.where(s, 0.0, ti)
+        num += im * w[..., None]
+        den += w
+    all_clipped = den == 0
+    shortest = ims[int(np.argmin(t))]
+    merged = np.where(all_clipped[..., None], shortest, num / np.where(all_clipped, 1.0, den)[..., None])
+    return merged.astype(np.float32), all_clipped

@@ -1,0 +1,158 @@
+"""The OpenCV backend on real files: an MJPG video and a 16-bit PNG image sequence."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from devices._linearize import ResponseCurve, calibrate_response, response_curve
+from devices.base import Frame
+from devices.opencv_camera import OpenCVCamera, open_camera, open_rig
+from engine.errors import DeviceError, InputError
+
+H, W = 48, 64
+
+
+def _write_sequence(folder, codes_list, dtype=np.uint16):
+    for i, codes in enumerate(codes_list):
+        assert cv2.imwrite(str(folder / f"f_{i:04d}.png"), np.ascontiguousarray(codes[:, :, ::-1].astype(dtype)))
+    return str(folder / "f_%04d.png")
+
+
+@pytest.fixture
+def radiance():
+    rng = np.random.default_rng(7)
+    return rng.uniform(0.02, 0.9, size=(H, W, 3))
+
+
+def test_image_sequence_16bit_is_linearised_by_a_known_curve(tmp_path, radiance):
+    gamma = 2.2
+    codes = np.rint(radiance ** (1 / gamma) * 65535).astype(np.uint16)
+    codes[0, 0] = 65535  # one clipped pixel
+    pattern = _write_sequence(tmp_path, [codes, codes])
+    cam = open_camera(pattern, response=f"gamma:{gamma}", exposure=0.5, gain=2.0)
+    try:
+        assert cam.resolution == (H, W)
+        frame = cam.capture()
+        assert isinstance(frame, Frame)
+        assert frame.image.dtype == np.float32 and frame.image.shape == (H, W, 3)
+        expected = (codes / 65535.0) ** gamma / (0.5 * 2.0)
+        np.testing.assert_allclose(frame.image, expected, rtol=1e-4, atol=1e-6)
+        assert frame.saturated[0, 0] and frame.saturated.sum() == 1
+        assert frame.exposure == 0.5 and frame.gain == 2.0
+        assert frame.metadata["response"] == "gamma 2.2"
+        cam.capture()
+        with pytest.raises(DeviceError, match="no more frames"):
+            cam.capture()
+    finally:
+        cam.close()
+    with pytest.raises(DeviceError, match="closed"):
+        cam.capture()
+
+
+def test_default_response_for_16bit_is_linear_and_flagged_assumed(tmp_path, radiance):
+    codes = np.rint(radiance * 65535).astype(np.uint16)
+    cam = open_camera(_write_sequence(tmp_path, [codes]))
+    try:
+        frame = cam.capture()
+    finally:
+        cam.close()
+    np.testing.assert_allclose(frame.image, codes / 65535.0, rtol=1e-5)
+    assert frame.metadata["response"] == "linear (assumed)"
+    assert any("assuming linear" in w for w in frame.metadata["warnings"])
+
+
+def test_frames_are_averaged_after_linearisation(tmp_path):
+    a = np.full((H, W, 3), 100, np.uint8)
+    b = np.full((H, W, 3), 200, np.uint8)
+    curve = ResponseCurve.srgb()
+    cam = open_camera(_write_sequence(tmp_path, [a, b], dtype=np.uint8), response=curve, average=2)
+    try:
+        frame = cam.capture()
+    finally:
+        cam.close()
+    expected = (curve.lut[100, 0] + curve.lut[200, 0]) / 2
+    np.testing.assert_allclose(frame.image, expected, rtol=1e-6)
+    assert frame.metadata["averaged"] == 2
+
+
+def test_mjpg_video_file_reads_back_linearised(tmp_path):
+    path = str(tmp_path / "clip.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (W, H))
+    assert writer.isOpened()
+    levels = [40, 120, 220]
+    for v in levels:
+        writer.write(np.full((H, W, 3), v, np.uint8))
+    writer.release()
+    raw = open_camera(path, response="linear")
+    cam = open_camera(path, response="srgb", exposure=0.25)
+    try:
+        for v in levels:
+            codes = raw.capture_codes()
+            assert np.abs(codes.astype(int) - v).max() <= 4  # MJPG moves codes by a level or few
+            frame = cam.capture()
+            np.testing.assert_allclose(frame.image, ResponseCurve.srgb().apply(codes) / 0.25, rtol=1e-6)
+        with pytest.raises(DeviceError, match="no more frames"):
+            cam.capture()
+    finally:
+        raw.close()
+        cam.close()
+
+
+def test_debevec_recovers_a_known_gamma(tmp_path):
+    rng = np.random.default_rng(3)
+    scene = rng.uniform(0.01, 1.0, size=(32, 32, 3))
+    times = [1 / 64, 1 / 16, 1 / 4, 1.0, 4.0]
+    images = [np.rint(np.clip(scene * t, 0, 1) ** (1 / 2.2) * 255).astype(np.uint8) for t in times]
+    curve = calibrate_response(images, times)
+    truth = np.linspace(0, 1, 256) ** 2.2
+    lut = curve.lut[:, 1] / curve.lut[200, 1] * truth[200]
+    # Debevec fixes the scale only; compare the shape over the well-exposed codes
+    np.testing.assert_allclose(lut[30:250], truth[30:250], rtol=0.15)
+
+
+def test_response_curve_errors():
+    with pytest.raises(InputError, match="non-decreasing"):
+        ResponseCurve([0.0, 0.5, 0.4])
+    with pytest.raises(InputError, match="response must be"):
+        response_curve("log", levels=256)
+    with pytest.raises(InputError, match="unsigned-integer"):
+        ResponseCurve.srgb().apply(np.zeros((2, 2, 3), np.float32))
+
+
+def test_bad_sources_and_options(tmp_path):
+    with pytest.raises(DeviceError, match="no such video"):
+        open_camera(str(tmp_path / "missing.avi"))
+    with pytest.raises(DeviceError, match="does not exist"):
+        open_camera(str(tmp_path / "nowhere" / "f_%04d.png"))
+    (tmp_path / "junk.avi").write_bytes(b"not a video")
+    with pytest.raises(DeviceError, match="cannot read"):
+        open_camera(str(tmp_path / "junk.avi"))
+    codes = np.zeros((H, W, 3), np.uint16)
+    with pytest.raises(InputError, match="average"):
+        open_camera(_write_sequence(tmp_path, [codes]), average=0)
+
+
+def test_projector_change_drops_queued_frames(tmp_path):
+    seq = [np.full((H, W, 3), 10 * (i + 1), np.uint8) for i in range(6)]
+    cam = open_camera(_write_sequence(tmp_path, seq, dtype=np.uint8), response="linear", discard=2)
+    try:
+        first = cam.capture_codes()[0, 0, 0]
+        cam.mark_stale()  # what the projector's shown-callback does
+        after = cam.capture_codes()[0, 0, 0]
+    finally:
+        cam.close()
+    assert (first, after) == (10, 40)
+
+
+def test_open_rig_with_a_given_projector(tmp_path):
+    from devices.virtual import open_rig as open_virtual
+
+    with open_virtual("cornell", ideal=True) as virtual:
+        proj = virtual.projector
+        codes = np.zeros((H, W, 3), np.uint16)
+        rig = open_rig(_write_sequence(tmp_path, [codes, codes]), projector=proj)
+        assert rig.projector is proj and rig.camera.resolution == (H, W)
+        assert rig.name.startswith("opencv:")
+        rig.camera.close()
