@@ -11,6 +11,9 @@ False-colour maps (difference and error views) are here too.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numba
 import numpy as np
 
@@ -74,6 +77,84 @@ def to_rgb32(image: np.ndarray, *, exposure: float = 0.0, out: np.ndarray | None
         raise InputError(f"out must be ({h}, {w}) uint32, got {out.shape} {out.dtype}")
     img = np.ascontiguousarray(image, dtype=np.float32)
     _pack_srgb(img, np.float32(2.0**exposure * 65535.0), _LUT, out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _recolor_rows(comps, unreached, weights, scale, lut, out, r0, r1):  # pragma: no cover - compiled
+    k, _, w, _ = comps.shape
+    n3 = 3 * w
+    acc = np.empty(n3, np.float32)
+    wt = np.empty(n3, np.float32)
+    for x in range(n3):
+        wt[x] = weights[x % 3]
+    for i in range(r0, r1):
+        # engine.recolor's Horner order, in float32: κ(c_0 + κ(c_1 + … κ c_{K-1})) + L̄_d
+        top = comps[k - 1, i].reshape(n3)
+        for x in range(n3):
+            acc[x] = top[x] * wt[x]
+        for n in range(k - 2, -1, -1):
+            row = comps[n, i].reshape(n3)
+            for x in range(n3):
+                acc[x] = (acc[x] + row[x]) * wt[x]
+        unr = unreached[i].reshape(n3)
+        for x in range(n3):
+            acc[x] = acc[x] + unr[x]
+        dst = out[i]
+        for j in range(w):
+            r = np.uint32(lut[_level(acc[3 * j], scale)])
+            g = np.uint32(lut[_level(acc[3 * j + 1], scale)])
+            b = np.uint32(lut[_level(acc[3 * j + 2], scale)])
+            dst[j] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
+
+
+_POOL: ThreadPoolExecutor | None = None
+_THREADS = max(1, min(2, os.cpu_count() or 1))
+
+
+def recolor_rgb32(decomposition, kappa, *, exposure: float = 0.0) -> np.ndarray:
+    """Recolor and convert for display in one pass: the live preview's hot path.
+
+    Same float32 arithmetic, in the same order, as :func:`engine.recolor.recolor` followed by
+    :func:`to_rgb32` — the result is bit-identical — but without the float image in between,
+    on row bands in a few threads (the kernel releases the GIL).
+
+    Parameters
+    ----------
+    decomposition : engine.decompose.Decomposition
+        Usually a :class:`engine.recolor.PreviewPack`'s small copy; float32, 3 channels.
+    kappa : float or (3,)
+    exposure : float
+        Display exposure in stops.
+
+    Returns
+    -------
+    (H, W) uint32
+        ``0xFFRRGGBB`` words.
+    """
+    from engine._checks import check_kappa
+
+    comps = np.ascontiguousarray(decomposition.components, dtype=np.float32)
+    unreached = np.ascontiguousarray(decomposition.unreached, dtype=np.float32)
+    if comps.ndim != 4 or comps.shape[3] != 3:
+        raise InputError(f"decomposition components must be (K, H, W, 3), got {comps.shape}")
+    if not np.isfinite(exposure):
+        raise InputError(f"exposure must be a finite number of stops, got {exposure!r}")
+    weights = check_kappa(kappa, 3).astype(np.float32)
+    h, w = comps.shape[1:3]
+    out = np.empty((h, w), np.uint32)
+    scale = np.float32(2.0**exposure * 65535.0)
+    bands = np.linspace(0, h, _THREADS + 1).astype(int)
+    if _THREADS == 1 or h < 64:
+        _recolor_rows(comps, unreached, weights, scale, _LUT, out, 0, h)
+        return out
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(_THREADS, thread_name_prefix="albedit-display")
+    jobs = [_POOL.submit(_recolor_rows, comps, unreached, weights, scale, _LUT, out, int(a), int(b))
+            for a, b in zip(bands[:-1], bands[1:])]
+    for j in jobs:
+        j.result()
     return out
 
 

@@ -53,6 +53,7 @@ class PreviewController(QObject):
         self.renderer: Renderer | None = None
         self.frame: Frame | None = None
         self.last_request: Request | None = None
+        self.last_id = 0
         self._shown_id = 0
         self._mask_versions: dict[int, int] = {}
         self._mask_snapshots: dict[tuple[int, int], MaskSnapshot] = {}
@@ -99,7 +100,8 @@ class PreviewController(QObject):
         req = Request(self.view, tuple(float(k) for k in self.doc.recolor_kappa()), self.exposure,
                       self._edit() if self.view in NEEDS_TRUTH else (), self.grid)
         self.last_request = req
-        return self.worker.submit((self.generation, self.renderer, req))
+        self.last_id = self.worker.submit((self.generation, self.renderer, req))
+        return self.last_id
 
     def readout(self, x: int, y: int):
         """(label, RGB) of the linear value at camera pixel (x, y) in the current view, or None."""

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from app.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, robust_max, to_rgb32
+from app.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, recolor_rgb32, robust_max, to_rgb32
 from engine.errors import InputError
 from engine.recolor import prepare_preview, recolor, recolor_preview
 
@@ -89,7 +89,8 @@ class Frame:
     second : (h, w) uint32, optional
         The other half of the split view (the original).
     linear : (h, w, 3) float32, optional
-        The linear image behind ``pixels`` (preview resolution), for tests and statistics.
+        The linear image behind ``pixels`` (preview resolution) when the view computed one
+        (not the recolored and split views, which go straight to pixels).
     scale : ScaleBar, optional
     tiles : list of Tile
     note : str
@@ -212,14 +213,13 @@ class Renderer:
         ev = request.exposure
         if view == View.ORIGINAL:
             return Frame(view, to_rgb32(self.small_photo, exposure=ev), self.shape, linear=self.small_photo)
-        if view == View.RECOLORED:
-            lin = self.recolored_small(request.kappa)
-            note = "" if self.pack is not None else "not acquired yet: showing the photograph"
-            return Frame(view, to_rgb32(lin, exposure=ev), self.shape, linear=lin, note=note)
-        if view == View.SPLIT:
-            lin = self.recolored_small(request.kappa)
-            return Frame(view, to_rgb32(lin, exposure=ev), self.shape, second=to_rgb32(self.small_photo, exposure=ev),
-                         linear=lin)
+        if view in (View.RECOLORED, View.SPLIT):
+            if self.pack is None:
+                pixels, note = to_rgb32(self.small_photo, exposure=ev), "not acquired yet: showing the photograph"
+            else:  # the hot path: recolor and display conversion fused, no float image in between
+                pixels, note = recolor_rgb32(self.pack.decomposition, request.kappa, exposure=ev), ""
+            second = to_rgb32(self.small_photo, exposure=ev) if view == View.SPLIT else None
+            return Frame(view, pixels, self.shape, second=second, note=note)
         if view == View.DIFFERENCE:
             lin = self.recolored_small(request.kappa)
             delta = luminance(lin) - luminance(self.small_photo)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.display import MAGNITUDE_MAP, false_colour, rgb32_to_rgb, robust_max, to_rgb32
+from app.display import MAGNITUDE_MAP, false_colour, recolor_rgb32, rgb32_to_rgb, robust_max, to_rgb32
 from app.render import Renderer, Request, View, area_average, component_grid, preview_factor
 from engine.errors import InputError
 from engine.imageio import to_display
@@ -28,6 +28,14 @@ def test_rgb32_bad_input():
         to_rgb32(np.zeros((2, 2, 3), np.float32), exposure=np.inf)
     with pytest.raises(InputError, match="out must be"):
         to_rgb32(np.zeros((2, 2, 3), np.float32), out=np.zeros((3, 2), np.uint32))
+
+
+@pytest.mark.parametrize("k", [1, 2, 4, 7])
+@pytest.mark.parametrize("kappa, exposure", [((2.0, 0.125, 8.0), 0.0), (0.7, -1.5), ((16, 1 / 16, 1), 2.0)])
+def test_fused_recolor_display_is_bit_identical(k, kappa, exposure):
+    d, _ = make_decomposition(k, h=33, w=71, k=k)
+    expected = to_rgb32(recolor(d, kappa), exposure=exposure)
+    np.testing.assert_array_equal(recolor_rgb32(d, kappa, exposure=exposure), expected)
 
 
 def test_false_colour_and_scale():
@@ -55,10 +63,10 @@ def test_recolored_frame_is_the_engines_preview(synthetic, max_shape):
     kappa = (2.0, 0.125, 8.0)
     frame = r.render(Request(View.RECOLORED, kappa, 0.5))
     expected = recolor_preview(prepare_preview(d, max_shape), kappa)
-    np.testing.assert_array_equal(frame.linear, expected)
-    np.testing.assert_array_equal(frame.pixels, to_rgb32(expected, exposure=0.5))
+    np.testing.assert_array_equal(r.recolored_small(kappa), expected)
+    np.testing.assert_array_equal(frame.pixels, to_rgb32(expected, exposure=0.5))  # fused path, bit-exact
     if max_shape == (1080, 1920):  # no reduction: exactly the full-resolution recolor
-        np.testing.assert_array_equal(frame.linear, recolor(d, kappa))
+        np.testing.assert_array_equal(frame.pixels, to_rgb32(recolor(d, kappa), exposure=0.5))
     assert frame.extent == photo.shape[:2]
 
 
@@ -76,7 +84,7 @@ def test_views_and_fallbacks(synthetic):
     bare = Renderer(photo).prepare()  # nothing acquired, no truth: everything shows the photograph
     for view in View:
         f = bare.render(Request(view, (4, 4, 4)))
-        np.testing.assert_array_equal(f.linear, photo)
+        np.testing.assert_array_equal(f.pixels, to_rgb32(photo))
         assert f.view in (View.ORIGINAL, View.RECOLORED, View.SPLIT)
 
 

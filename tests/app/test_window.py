@@ -7,6 +7,7 @@ import pytest
 from PySide6.QtWidgets import QMessageBox
 
 from app import files
+from app.display import to_rgb32
 from app.model import Document
 from app.panels import kappa_to_ticks
 from app.render import View
@@ -38,20 +39,20 @@ def test_slider_moves_change_the_preview_as_engine_recolor_predicts(make_window,
     assert w.undo_group.activeStack().count() == steps + 2  # one undo step per drag
     pack = prepare_preview(d, w._screen_shape())
     frame = w.canvas.frame
-    np.testing.assert_array_equal(frame.linear, recolor_preview(pack, kappa))
-    assert frame.linear.shape[:2] == d.target.shape  # the synthetic image fits the screen: full resolution
-    np.testing.assert_array_equal(frame.linear, recolor(d, kappa))
+    np.testing.assert_array_equal(frame.pixels, to_rgb32(recolor_preview(pack, kappa)))
+    assert frame.pixels.shape == d.target.shape  # the synthetic image fits the screen: full resolution
+    np.testing.assert_array_equal(frame.pixels, to_rgb32(recolor(d, kappa)))
     panel.link.setChecked(True)
     _drag_slider(panel.sliders[1], [100])  # G doubles: linked channels keep their ratios
     np.testing.assert_allclose(acquired_doc.by_name("wall").kappa, kappa * 2)
-    np.testing.assert_array_equal(w.canvas.frame.linear, recolor(d, acquired_doc.by_name("wall").kappa))
+    np.testing.assert_array_equal(w.canvas.frame.pixels, to_rgb32(recolor(d, acquired_doc.by_name("wall").kappa)))
     panel.spins[0].setValue(3.0)  # numeric entry
     assert acquired_doc.by_name("wall").kappa[0] == 3.0
     assert panel.sliders[0].value() == kappa_to_ticks(3.0)
     w.act_undo.trigger()
     w.act_undo.trigger()
     np.testing.assert_array_equal(acquired_doc.by_name("wall").kappa, kappa)
-    np.testing.assert_array_equal(w.canvas.frame.linear, recolor(d, kappa))
+    np.testing.assert_array_equal(w.canvas.frame.pixels, to_rgb32(recolor(d, kappa)))
     assert panel.sliders[2].value() == -300  # the model's undo moved the slider back
     panel.reset.click()
     np.testing.assert_array_equal(acquired_doc.by_name("wall").kappa, [1, 1, 1])

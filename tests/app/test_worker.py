@@ -7,6 +7,7 @@ import threading
 import numpy as np
 import pytest
 
+from app.display import to_rgb32
 from app.preview import PreviewController
 from app.render import View
 from app.worker import Job, LatestWorker, UiCaller, on_ui_thread
@@ -63,7 +64,8 @@ def test_preview_follows_kappa_of_the_last_cascade_target(qtbot, acquired_doc):
     preview = PreviewController(doc, max_shape=(24, 32), synchronous=True)
     d = doc.decomposition
     doc.set_kappa(doc.by_name("wall").uid, [3.0, 1.0, 0.25])
-    np.testing.assert_array_equal(preview.frame.linear, recolor_preview(prepare_preview(d, (24, 32)), [3.0, 1.0, 0.25]))
+    expected = recolor_preview(prepare_preview(d, (24, 32)), [3.0, 1.0, 0.25])
+    np.testing.assert_array_equal(preview.frame.pixels, to_rgb32(expected))
     n = preview.frame.request_id
     doc.set_kappa(doc.add_target("unacquired").uid, 5.0)  # not in the cascade: no new frame
     assert preview.frame.request_id == n
