@@ -242,12 +242,14 @@ def decode_raw(source: bytes | str | os.PathLike) -> RawDecode:
 
     Notes
     -----
-    ``postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, output_color=raw,
-    user_wb=[1, 1, 1, 1], adjust_maximum_thr=0.0, user_flip=0)``: ``adjust_maximum_thr`` must be
+    ``postprocess(**engine.imageio.raw_postprocess_options(), user_flip=0)``, i.e. gamma (1, 1),
+    no auto-brightening, 16 bits, raw colour, ``user_wb=[1, 1, 1, 1]``, ``adjust_maximum_thr=0.0``: ``adjust_maximum_thr`` must be
     0, or LibRaw rescales each frame by its own maximum and two captures stop being comparable.
     Black and white level come from the file.
     """
     import rawpy
+
+    from engine.imageio import raw_postprocess_options
 
     data = io.BytesIO(bytes(source)) if isinstance(source, (bytes, bytearray, memoryview)) else os.fspath(source)
     try:
@@ -255,16 +257,8 @@ def decode_raw(source: bytes | str | os.PathLike) -> RawDecode:
             mosaic = raw.raw_image_visible.copy()
             white = float(raw.white_level)
             black = float(np.mean(raw.black_level_per_channel))
-            rgb = raw.postprocess(
-                gamma=(1, 1),
-                no_auto_bright=True,
-                output_bps=16,
-                output_color=rawpy.ColorSpace.raw,
-                user_wb=[1.0, 1.0, 1.0, 1.0],
-                adjust_maximum_thr=0.0,
-                user_flip=0,
-            )
-    except (rawpy.LibRawError, OSError, ValueError) as exc:
+            rgb = raw.postprocess(**raw_postprocess_options(), user_flip=0)
+    except (rawpy.LibRawError, rawpy.NotSupportedError, OSError, ValueError, EOFError) as exc:
         raise DeviceError(f"could not decode the RAW data: {exc}") from None
     image = rgb.astype(np.float32) / np.float32(65535.0)
     saturated = np.any(rgb >= 65535, axis=2)
