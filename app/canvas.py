@@ -17,8 +17,8 @@ from app.painting import EventType, MouseEvent, Painter, Tool
 from app.render import Frame, View
 
 _BACKGROUND = QColor(38, 38, 40)
-_OVERLAY_ALPHA = 40
-_CURRENT_ALPHA = 70
+_OVERLAY_ALPHA = 0  # other targets: outline only, so the recoloring stays visible
+_CURRENT_ALPHA = 28  # the current target: a light tint under its outline
 
 
 def _qimage(words: np.ndarray) -> QImage:

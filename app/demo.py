@@ -53,8 +53,8 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
     -------
     document : Document
         Clean (nothing to save yet), scene targets painted; with ``acquire``, the right wall
-        acquired and recolored as in Fig. 6, and the pixels without a projector
-        correspondence marked unreachable.
+        acquired and recolored as in Fig. 6, and the pixels the projector does not light
+        marked unreachable (:func:`unreachable_pixels`).
     rig : devices.base.Rig
         Still open: its ``truth`` feeds the ground-truth views. Close it with the window.
     session : engine.session.Session or None
@@ -86,7 +86,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
                              progress=_stage(progress, f"acquiring {name!r}"), should_stop=should_stop)
         decomposition = load_decomposition(session)
         photo = np.ascontiguousarray(result.acquisition.observations[0], np.float32)
-        doc = Document(photo, unreachable=~calibration.correspondence.valid, source=rig_name, truth=rig.truth)
+        doc = Document(photo, unreachable=unreachable_pixels(calibration), source=rig_name, truth=rig.truth)
         for other, mask in targets.items():  # the acquired target last: the end of its cascade
             if other != name:
                 doc.add_target(other, mask)
@@ -99,6 +99,18 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
     except BaseException:
         rig.close()
         raise
+
+
+def unreachable_pixels(calibration) -> np.ndarray:
+    """Camera pixels the projector does not light at all (shadow, outside its frame).
+
+    Pixels whose Gray code merely had low contrast are not included: acquisition
+    interpolates their correspondence from the neighbours (``engine.acquire.prepare_target``).
+    """
+    from engine.calibrate.graycode import PixelStatus
+
+    status = np.asarray(calibration.correspondence.status)
+    return (status == PixelStatus.UNLIT) | (status == PixelStatus.OUT_OF_RANGE)
 
 
 def _cache_key(session) -> str:

@@ -317,13 +317,13 @@ class MainWindow(QMainWindow):
     def _build_status(self) -> None:
         sb = self.statusBar()
         self.readout = QLabel()
-        self.readout.setMinimumWidth(420)
+        self.readout.setMinimumWidth(560)
         self.readout.setStyleSheet("font-family: monospace;")
         self.note = QLabel()
         self.zoom_label = QLabel()
         self.progress = JobProgress()
-        sb.addWidget(self.readout)
-        sb.addWidget(self.note, 1)
+        sb.addWidget(self.note, 1)  # temporary messages cover this one only
+        sb.addPermanentWidget(self.readout)
         sb.addPermanentWidget(self.progress)
         sb.addPermanentWidget(self.zoom_label)
 

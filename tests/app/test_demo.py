@@ -28,6 +28,7 @@ def test_demo_acquires_the_right_wall_like_fig6(demo):
     np.testing.assert_array_equal(wall.kappa, DEMO_KAPPA)
     assert doc.acquisition.cascade == (wall.uid,) and not doc.is_dirty()
     assert doc.unreachable is not None and doc.unreachable.shape == doc.shape
+    doc.check_acquirable([wall.uid])  # the app agrees with the engine, which acquired every pixel
     truth = rig.truth.recolor([(wall.mask, np.array(DEMO_KAPPA))])
     est = recolor(doc.decomposition, DEMO_KAPPA)
     assert np.linalg.norm(est - truth) / np.linalg.norm(truth) < 0.01
@@ -35,6 +36,16 @@ def test_demo_acquires_the_right_wall_like_fig6(demo):
     g, b = est[wall.mask].mean(axis=0)[1:]
     g0, b0 = doc.photograph[wall.mask].mean(axis=0)[1:]
     assert g0 > b0 and b > g
+
+
+def test_unreachable_pixels_are_the_unlit_ones():
+    from types import SimpleNamespace
+
+    from app.demo import unreachable_pixels
+
+    status = np.array([[0, 1, 2, 3]], np.uint8)  # decoded, unlit, low contrast, out of range
+    cal = SimpleNamespace(correspondence=SimpleNamespace(status=status))
+    assert unreachable_pixels(cal).tolist() == [[False, True, False, True]]
 
 
 def test_demo_session_reopens_with_its_acquisition(demo):
