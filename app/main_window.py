@@ -36,7 +36,7 @@ from app.painting import Painter, Tool
 from app.panels import AlbedoPanel, TargetPanel
 from app.preview import PreviewController
 from app.qt_history import QtHistory
-from app.render import NEEDS_TRUTH, View, component_grid
+from app.render import View, component_grid
 from app.worker import Job
 from engine.errors import InputError
 from engine.session import Session
@@ -472,10 +472,11 @@ class MainWindow(QMainWindow):
         view = View(view)
         self.view_actions[view].setChecked(True)
         if self.preview is not None:
-            self._update_grid(view)
+            self._update_grid()
             self.preview.set_view(view)
 
-    def _update_grid(self, view: View | None = None) -> None:
+    def _update_grid(self) -> None:
+        """Rows × columns of the components view that show the tiles largest in the canvas."""
         if self.preview is None or self.doc.decomposition is None:
             return
         size = self.canvas.size() if self.canvas is not None else self.size()
@@ -731,12 +732,16 @@ class MainWindow(QMainWindow):
             return True
         if not self.save():
             return False
-        if self.job is not None:  # a threaded save: wait for it before going on
-            job = self.job
-            while job.running:
-                QGuiApplication.processEvents()
-                job.join(0.02)
+        self._wait_for_job()  # a threaded save: wait for it before going on
         return not self.doc.is_dirty()
+
+    def _wait_for_job(self, timeout: float = 60.0) -> None:
+        """Let the running job finish, keeping the UI thread serving it (it may ask for UI calls)."""
+        job, waited = self.job, 0.0
+        while job is not None and job.running and waited < timeout:
+            QGuiApplication.processEvents()
+            job.join(0.02)
+            waited += 0.02
 
     def ask_unsaved(self) -> QMessageBox.StandardButton:
         """The unsaved-changes prompt (Save / Discard / Cancel)."""
@@ -751,7 +756,7 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt override
         if self.job is not None:
             self.job.cancel()
-            self.job.join(5.0)
+            self._wait_for_job(10.0)
         if not self.maybe_save():
             event.ignore()
             return

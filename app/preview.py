@@ -109,7 +109,7 @@ class PreviewController(QObject):
         if r is None or self.view == View.COMPONENTS:
             return None
         edit = self.last_request.edit if self.last_request else ()
-        if self.view in NEEDS_TRUTH and (r._truth_cache is None or r._truth_cache[0] != edit):
+        if self.view in NEEDS_TRUTH and not r.has_truth(edit):
             return None  # ground truth still being computed: never block the UI thread for it
         return r.readout(self.view, x, y, self.doc.recolor_kappa(), edit)
 

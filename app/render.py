@@ -182,7 +182,7 @@ class Renderer:
         self.pack = None
         self.small_photo: np.ndarray | None = None
         self._tiles: dict[tuple[int, int], tuple[np.ndarray, list[Tile]]] = {}
-        self._truth_cache: tuple[Any, np.ndarray, np.ndarray] | None = None
+        self._truth_cache: tuple[Any, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ preparation
     def prepare(self) -> "Renderer":
@@ -249,12 +249,16 @@ class Renderer:
             return self.small_photo
         return recolor_preview(self.pack, kappa)
 
+    def has_truth(self, edit) -> bool:
+        """Whether the ground truth of ``edit`` is computed already (read-out never waits for it)."""
+        return self._truth_cache is not None and self._truth_cache[0] == edit
+
     def truth_full(self, edit) -> np.ndarray:
         """Full-resolution ground truth of ``edit`` (cached for the last edit)."""
-        if self._truth_cache is not None and self._truth_cache[0] == edit:
+        if self.has_truth(edit):
             return self._truth_cache[1]
         image = np.asarray(self.truth(edit), np.float32)
-        self._truth_cache = (edit, image, np.empty(0))
+        self._truth_cache = (edit, image)
         return image
 
     def component_tiles(self, grid: tuple[int, int], exposure: float):
@@ -322,7 +326,6 @@ class Renderer:
                       d.target[y : y + 1, x : x + 1], d.constraint, d.unreached_light, None)
         return recolor(one, kappa)[0, 0]
 
-    # ------------------------------------------------------------------ helpers
 
 def _sup(n: int) -> str:
     return str(n).translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))

@@ -152,3 +152,15 @@ def test_worker_drives_the_ui_thread_and_waits(qtbot):
     assert blocker.args[0] == (["on the wall"] * 3, (2, 2))
     assert screen.shown == [0.0, 12.0, 24.0]
     assert caller.call(lambda: 7) == 7  # on the UI thread itself: a direct call
+
+
+def test_threaded_preview_delivers_the_latest_frame(qtbot, acquired_doc):
+    doc = acquired_doc
+    preview = PreviewController(doc, max_shape=(24, 32))  # the app's default: a worker thread
+    wall = doc.by_name("wall").uid
+    for v in (1.5, 2.0, 3.0, 4.0):
+        doc.set_kappa(wall, [v, 1.0, 1.0])
+    qtbot.waitUntil(lambda: preview.frame is not None and preview.frame.request_id == preview.last_id, timeout=5000)
+    expected = recolor_preview(prepare_preview(doc.decomposition, (24, 32)), [4.0, 1.0, 1.0])
+    np.testing.assert_array_equal(preview.frame.pixels, to_rgb32(expected))
+    preview.close()
