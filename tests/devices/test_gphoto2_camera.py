@@ -1,0 +1,264 @@
+"""The gphoto2 backend against a scripted stand-in of python-gphoto2 (every exchange must be used)."""
+
+from __future__ import annotations
+
+import threading
+import types
+
+import numpy as np
+import pytest
+
+from devices.gphoto2_camera import GPhoto2Camera, list_cameras, open_rig, probe
+from engine.errors import DeviceError, InputError
+
+H, W = 32, 48
+
+
+class GPhoto2Error(Exception):
+    def __init__(self, code):
+        super().__init__(f"[{code}] libgphoto2 error")
+        self.code = code
+
+
+class Widget:
+    def __init__(self, value, choices):
+        self.value, self.choices = value, list(choices)
+
+    def get_value(self):
+        return self.value
+
+    def get_choices(self):
+        return iter(self.choices)
+
+    def set_value(self, value):
+        self.value = value
+
+
+SHUTTERS = ["bulb", "30", "1", "0.5", "1/4", "1/8", "1/60", "1/250"]
+ISOS = ["Auto", "100", "200", "400"]
+
+
+class Script:
+    """Expected calls in order: (method, args, result); a result that is an exception is raised."""
+
+    def __init__(self, steps):
+        self.steps = list(steps)
+        self.used = 0
+        self.lock = threading.Lock()
+
+    def __call__(self, method, *args):
+        with self.lock:
+            assert self.used < len(self.steps), f"unexpected call {method}{args}: script exhausted"
+            want, want_args, result = self.steps[self.used]
+            shown = tuple(a.value if isinstance(a, Widget) else a for a in args)
+            assert (method, shown) == (want, tuple(want_args)), f"call {self.used}: got {method}{shown}, expected {want}{tuple(want_args)}"
+            self.used += 1
+        if isinstance(result, BaseException):
+            raise result
+        return result() if callable(result) and not isinstance(result, Widget) else result
+
+    def finished(self):
+        assert self.used == len(self.steps), f"unused scripted exchanges: {self.steps[self.used:]}"
+
+
+def fake_gphoto2(script):
+    class Camera:
+        autodetect = staticmethod(lambda: script("autodetect"))
+
+        def __getattr__(self, method):
+            return lambda *args: script(method, *args)
+
+    return types.SimpleNamespace(
+        Camera=Camera, GPhoto2Error=GPhoto2Error, GP_CAPTURE_IMAGE=0, GP_FILE_TYPE_NORMAL=1, PortInfoList=None
+    )
+
+
+class CameraFile:
+    def __init__(self, data):
+        self.data = data
+
+    def get_data_and_size(self):
+        return memoryview(self.data)
+
+
+def opening(*, shutter="1/60", iso="200", target=True):
+    """The exchanges of GPhoto2Camera(exposure=1/8, iso=200) on a camera with these settings."""
+    steps = [("init", (), None)]
+    steps.append(("get_single_config", ("capturetarget",), Widget("Memory card", ["Internal RAM", "Memory card"]) if target else GPhoto2Error(-2)))
+    if target:
+        steps.append(("set_single_config", ("capturetarget", "Internal RAM"), None))
+    steps += [
+        ("get_single_config", ("imageformat",), Widget("Large Fine JPEG", ["Large Fine JPEG", "RAW + Large Fine JPEG", "RAW"])),
+        ("set_single_config", ("imageformat", "RAW"), None),
+        ("get_single_config", ("iso",), Widget("Auto", ISOS)),
+        ("set_single_config", ("iso", iso), None),
+        ("get_single_config", ("shutterspeed",), Widget(shutter, SHUTTERS)),
+        ("get_single_config", ("shutterspeed",), Widget(shutter, SHUTTERS)),
+        ("set_single_config", ("shutterspeed", "1/8"), None),
+        ("get_single_config", ("iso",), Widget(iso, ISOS)),
+    ]
+    return steps
+
+
+def shot(name, data, *, delete_result=None):
+    path = types.SimpleNamespace(folder="/", name=name)
+    return [
+        ("capture", (0,), path),
+        ("file_get", ("/", name, 1), CameraFile(data)),
+        ("file_delete", ("/", name), delete_result),
+    ]
+
+
+def test_capture_downloads_deletes_and_decodes_linearly(make_dng):
+    mosaic = np.full((H, W), 64 + 1000, np.uint16)
+    mosaic[0, 0] = 4000
+    raw = make_dng(mosaic)
+    script = Script(opening() + shot("capt0000.dng", raw) + shot("capt0001.dng", raw, delete_result=GPhoto2Error(-6)) + [("exit", (), None)])
+    cam = GPhoto2Camera(exposure=0.1, iso=200, gp=fake_gphoto2(script))
+    assert cam.exposure == 0.125 and cam.gain == 2.0  # nearest shutter 1/8 s; ISO 200 / base 100
+    frame = cam.capture()
+    np.testing.assert_allclose(frame.image[4:, 4:], 1000 / (4000 - 64) / (0.125 * 2.0), rtol=1e-4)
+    assert frame.saturated[0, 0] and not frame.saturated[4:, 4:].any()
+    assert frame.metadata["raw_name"] == "capt0000.dng" and cam.last_raw == raw
+    assert frame.metadata["settings"] == {"capture_target": "Internal RAM", "image_format": "RAW", "iso": "200", "exposure": "1/8"}
+    assert cam.resolution == (H, W) and cam.warnings == []
+    cam.capture()  # the body refuses the delete: recorded, not fatal
+    assert "deleting capt0001.dng from the camera failed" in cam.warnings[0]
+    cam.close()
+    cam.close()  # idempotent: exit once
+    script.finished()
+
+
+def test_exposure_snaps_to_nearest_shutter_speed_and_reports_it():
+    script = Script(
+        opening()
+        + [
+            ("get_single_config", ("shutterspeed",), Widget("1/8", SHUTTERS)),
+            ("set_single_config", ("shutterspeed", "1/250"), None),
+            ("get_single_config", ("shutterspeed",), Widget("1/250", SHUTTERS)),
+            ("set_single_config", ("shutterspeed", "30"), None),
+            ("exit", (), None),
+        ]
+    )
+    cam = GPhoto2Camera(exposure=1 / 8, iso="200", gp=fake_gphoto2(script))
+    cam.exposure = 1 / 8 / 1e3  # below the shortest: the shortest the camera has
+    assert cam.exposure == 1 / 250
+    cam.exposure = 1 / 250  # no change, no exchange
+    cam.exposure = 100.0
+    assert cam.exposure == 30.0
+    with pytest.raises(InputError, match="exposure"):
+        cam.exposure = -1
+    cam.close()
+    script.finished()
+
+
+def test_invalid_iso_lists_the_choices():
+    steps = opening()[:5] + [("get_single_config", ("iso",), Widget("Auto", ISOS)), ("exit", (), None)]
+    script = Script(steps)
+    with pytest.raises(InputError, match="iso 150 is not offered by this camera; valid choices: Auto, 100, 200, 400"):
+        GPhoto2Camera(exposure=1 / 8, iso=150, gp=fake_gphoto2(script))
+    script.finished()
+
+
+def test_camera_without_capture_target_warns():
+    script = Script(opening(target=False) + [("exit", (), None)])
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
+    assert "no capture target setting" in cam.warnings[0]
+    cam.close()
+    script.finished()
+
+
+@pytest.mark.parametrize(
+    "code, words",
+    [
+        (-105, "no camera found"),
+        (-52, "another program holds it"),
+        (-53, "claimed by another program"),
+        (-110, "camera is busy"),
+        (-10, "did not answer in time"),
+        (-7, "input/output error"),
+        (-99, "libgphoto2 error -99"),
+    ],
+)
+def test_error_codes_become_plain_words(code, words):
+    script = Script([("init", (), GPhoto2Error(code))])
+    with pytest.raises(DeviceError, match=f"opening the camera failed: .*{words}"):
+        GPhoto2Camera(gp=fake_gphoto2(script))
+    script.finished()
+
+
+def test_capture_error_still_deletes_nothing_and_maps_busy(make_dng):
+    script = Script(opening() + [("capture", (0,), GPhoto2Error(-110)), ("exit", (), None)])
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
+    with pytest.raises(DeviceError, match="capturing failed: the camera is busy"):
+        cam.capture()
+    cam.close()
+    script.finished()
+
+
+def test_download_failure_still_deletes_the_shot():
+    path = types.SimpleNamespace(folder="/store", name="IMG_1.CR2")
+    script = Script(
+        opening()
+        + [("capture", (0,), path), ("file_get", ("/store", "IMG_1.CR2", 1), GPhoto2Error(-7)), ("file_delete", ("/store", "IMG_1.CR2"), None), ("exit", (), None)]
+    )
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
+    with pytest.raises(DeviceError, match="downloading IMG_1.CR2 failed: input/output error"):
+        cam.capture()
+    cam.close()
+    script.finished()
+
+
+def test_jpeg_instead_of_raw_is_refused():
+    script = Script(opening() + shot("capt0000.jpg", b"\xff\xd8") + [("exit", (), None)])
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
+    with pytest.raises(DeviceError, match="not a RAW file"):
+        cam.capture()
+    cam.close()
+    script.finished()
+
+
+def test_a_hung_call_times_out_and_blocks_further_calls():
+    release = threading.Event()
+    script = Script(opening() + [("capture", (0,), lambda: release.wait(5)), ("exit", (), None)])
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, timeout=0.2, gp=fake_gphoto2(script))
+    with pytest.raises(DeviceError, match="did not finish capturing within"):
+        cam.capture()
+    with pytest.raises(DeviceError, match="has not answered an earlier capturing"):
+        cam.capture()
+    release.set()
+    cam._dog._hung.join(5)
+    cam.close()
+    script.finished()
+
+
+def test_listing_and_probe():
+    script = Script([("autodetect", (), [("Nikon DSC D7100", "usb:001,004")]), ("autodetect", (), []), ("autodetect", (), GPhoto2Error(-7))])
+    gp = fake_gphoto2(script)
+    assert list_cameras(gp=gp) == [("Nikon DSC D7100", "usb:001,004")]
+    assert [str(a) for a in probe(gp=gp)] == ["gphoto2:: unavailable — no camera detected (connected by USB, switched on, not in mass-storage mode?)"]
+    (entry,) = probe(gp=gp)
+    assert not entry.ok and "input/output error" in entry.reason
+    script.finished()
+
+
+def test_missing_library_is_a_plain_device_error():
+    import importlib.util
+
+    if importlib.util.find_spec("gphoto2") is not None:
+        pytest.skip("python-gphoto2 is installed here")
+    with pytest.raises(DeviceError, match="pip install 'albedit\\[gphoto2\\]'"):
+        GPhoto2Camera()
+    (entry,) = probe()
+    assert not entry.ok and "not installed" in entry.reason
+
+
+def test_open_rig_with_given_projector(make_dng):
+    from devices.virtual import open_rig as open_virtual
+
+    script = Script(opening() + [("exit", (), None)])
+    with open_virtual("cornell", ideal=True) as virtual:
+        rig = open_rig("", projector=virtual.projector, exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
+        assert rig.name == "gphoto2"
+        rig.camera.close()
+    script.finished()
