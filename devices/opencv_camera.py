@@ -195,7 +195,11 @@ class OpenCVCamera:
     def exposure(self, seconds: float) -> None:
         seconds = check_positive("exposure", seconds)
         if not self.is_device:
-            self._exposure = seconds
+            if seconds != self._exposure:  # the frames were taken at one exposure: never pretend otherwise
+                raise InputError(
+                    f"the exposure of a file source is fixed at {self._exposure:g} s (asked for {seconds:g} s); "
+                    "pass exposure= when opening it"
+                )
             return
         value = _exposure_to_driver(self.backend, seconds)
         if value is None:

@@ -42,6 +42,9 @@ def test_image_sequence_16bit_is_linearised_by_a_known_curve(tmp_path, radiance)
         assert frame.saturated[0, 0] and frame.saturated.sum() == 1
         assert frame.exposure == 0.5 and frame.gain == 2.0
         assert frame.metadata["response"] == "gamma 2.2"
+        cam.exposure = 0.5  # unchanged: accepted (the Recorder restores it after bracketing)
+        with pytest.raises(InputError, match="fixed at 0.5 s"):
+            cam.exposure = 0.25  # a file cannot be re-exposed
         cam.capture()
         with pytest.raises(DeviceError, match="no more frames"):
             cam.capture()
