@@ -24,23 +24,26 @@ from engine.imageio import srgb_encode
 _LUT = np.round(srgb_encode(np.arange(65536, dtype=np.float64) / 65535.0) * 255.0).astype(np.uint8)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
-def _level(x, scale):  # pragma: no cover - compiled
-    """16-bit table index of x·scale, clipped, rounded half to even like ``np.rint``."""
-    v = min(max(x * scale, np.float32(0.0)), np.float32(65535.0)) + np.float32(0.5)  # exact below 2**23
-    idx = np.int32(v)
-    return idx - ((idx & 1) & np.int32(np.float32(idx) == v))  # branch-free tie to even
-
-
 @numba.njit(cache=True, nogil=True)
 def _pack_srgb(image, scale, lut, out):  # pragma: no cover - compiled
-    src = image.reshape(-1)
-    dst = out.reshape(-1)
-    for p in range(dst.size):
-        r = np.uint32(lut[_level(src[3 * p], scale)])
-        g = np.uint32(lut[_level(src[3 * p + 1], scale)])
-        b = np.uint32(lut[_level(src[3 * p + 2], scale)])
-        dst[p] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
+    h, w = out.shape
+    n3 = 3 * w
+    idx = np.empty(n3, np.int32)
+    lo, hi, half = np.float32(0.0), np.float32(65535.0), np.float32(0.5)
+    for i in range(h):
+        src = image[i].reshape(n3)
+        for x in range(n3):
+            # 16-bit table index of x·scale, clipped, rounded half to even like np.rint:
+            # v + 0.5 is exact in float32 below 2**23, and a tie is an integer v + 0.5
+            v = min(max(src[x] * scale, lo), hi) + half
+            t = np.int32(v)
+            idx[x] = t - ((t & 1) & np.int32(np.float32(t) == v))
+        dst = out[i]
+        for j in range(w):
+            r = np.uint32(lut[idx[3 * j]])
+            g = np.uint32(lut[idx[3 * j + 1]])
+            b = np.uint32(lut[idx[3 * j + 2]])
+            dst[j] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
 
 
 def to_rgb32(image: np.ndarray, *, exposure: float = 0.0, out: np.ndarray | None = None) -> np.ndarray:
@@ -85,11 +88,14 @@ def _recolor_rows(comps, unreached, weights, scale, lut, out, r0, r1):  # pragma
     k, _, w, _ = comps.shape
     n3 = 3 * w
     acc = np.empty(n3, np.float32)
+    idx = np.empty(n3, np.int32)
     wt = np.empty(n3, np.float32)
     for x in range(n3):
         wt[x] = weights[x % 3]
+    lo, hi, half = np.float32(0.0), np.float32(65535.0), np.float32(0.5)
     for i in range(r0, r1):
-        # engine.recolor's Horner order, in float32: κ(c_0 + κ(c_1 + … κ c_{K-1})) + L̄_d
+        # engine.recolor's Horner order, in float32: κ(c_0 + κ(c_1 + … κ c_{K-1})) + L̄_d;
+        # contiguous row loops, so they vectorise
         top = comps[k - 1, i].reshape(n3)
         for x in range(n3):
             acc[x] = top[x] * wt[x]
@@ -98,13 +104,15 @@ def _recolor_rows(comps, unreached, weights, scale, lut, out, r0, r1):  # pragma
             for x in range(n3):
                 acc[x] = (acc[x] + row[x]) * wt[x]
         unr = unreached[i].reshape(n3)
-        for x in range(n3):
-            acc[x] = acc[x] + unr[x]
+        for x in range(n3):  # to_rgb32's table index (see _pack_srgb)
+            v = min(max((acc[x] + unr[x]) * scale, lo), hi) + half
+            t = np.int32(v)
+            idx[x] = t - ((t & 1) & np.int32(np.float32(t) == v))
         dst = out[i]
         for j in range(w):
-            r = np.uint32(lut[_level(acc[3 * j], scale)])
-            g = np.uint32(lut[_level(acc[3 * j + 1], scale)])
-            b = np.uint32(lut[_level(acc[3 * j + 2], scale)])
+            r = np.uint32(lut[idx[3 * j]])
+            g = np.uint32(lut[idx[3 * j + 1]])
+            b = np.uint32(lut[idx[3 * j + 2]])
             dst[j] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
 
 
