@@ -49,3 +49,9 @@ def test_check_propagates_open_errors(tmp_path):
         check_rig(f"hotfolder:{tmp_path / 'missing'}")
     with pytest.raises(InputError, match="unknown rig backend"):
         check_rig("nosuch:thing")
+
+
+def test_check_rig_with_device(device_name):
+    """Hardware: ``pytest tests/devices --device gphoto2`` (or any rig name) takes one real frame."""
+    report = check_rig(device_name)
+    assert report.splitlines()[-1] == "rig closed" and "saturated:" in report
