@@ -140,7 +140,8 @@ def main(argv=None) -> int:
     t = time.perf_counter()
     doc = make_document(a.height, a.width, a.order, np.random.default_rng(a.seed))
     print(f"decomposition: K = {a.order}, {a.height}x{a.width} px ({doc.decomposition.components.nbytes / 2**20:.0f} MiB), "
-          f"view {VIEW[1]}x{VIEW[0]}, {os.cpu_count()} cores; built in {time.perf_counter() - t:.1f} s")
+          f"view {VIEW[1]}x{VIEW[0]}, {os.cpu_count()} cores (load average {os.getloadavg()[0]:.1f}: other work "
+          f"on the machine shows up in the tails); built in {time.perf_counter() - t:.1f} s")
     rows = [
         ("app, preview worker thread", measure_app(app, doc, synchronous=False, events=a.events)),
         ("app, synchronous switch", measure_app(app, doc, synchronous=True, events=a.events)),
