@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.files import unreachable_pixels
 from app.model import Document
 from engine.progress import checkpoint, report
 
@@ -54,7 +55,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
     document : Document
         Clean (nothing to save yet), scene targets painted; with ``acquire``, the right wall
         acquired and recolored as in Fig. 6, and the pixels the projector does not light
-        marked unreachable (:func:`unreachable_pixels`).
+        marked unreachable (:func:`app.files.unreachable_pixels`).
     rig : devices.base.Rig
         Still open: its ``truth`` feeds the ground-truth views. Close it with the window.
     session : engine.session.Session or None
@@ -99,18 +100,6 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
     except BaseException:
         rig.close()
         raise
-
-
-def unreachable_pixels(calibration) -> np.ndarray:
-    """Camera pixels the projector does not light at all (shadow, outside its frame).
-
-    Pixels whose Gray code merely had low contrast are not included: acquisition
-    interpolates their correspondence from the neighbours (``engine.acquire.prepare_target``).
-    """
-    from engine.calibrate.graycode import PixelStatus
-
-    status = np.asarray(calibration.correspondence.status)
-    return (status == PixelStatus.UNLIT) | (status == PixelStatus.OUT_OF_RANGE)
 
 
 def _cache_key(session) -> str:

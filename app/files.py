@@ -14,8 +14,10 @@ session cache under the acquisition's key, all *before* the state is rewritten, 
 that fails half way leaves the previous save intact ("nothing lost").
 
 Which capture is the photograph: ``edits.photograph``, else ``state["photograph"]``, else a
-capture named ``"photograph"``, else the first capture. A mask named ``"unreachable"`` marks
-camera pixels the projector cannot light.
+capture named ``"photograph"``, else the last capture whose metadata says ``kind:
+"photograph"`` (what ``engine.workflow.run_capture`` writes), else the first capture. A mask
+named ``"unreachable"`` marks camera pixels the projector cannot light; without one, they are
+taken from the session's calibration (:func:`unreachable_pixels`).
 """
 
 from __future__ import annotations
@@ -81,6 +83,27 @@ def open_document(path, *, history=None) -> tuple[Document, Session | None, list
     return doc, None, []
 
 
+def unreachable_pixels(calibration) -> np.ndarray:
+    """Camera pixels the projector does not light at all (shadow, outside its frame).
+
+    Pixels whose Gray code merely had low contrast are not included: acquisition
+    interpolates their correspondence from the neighbours (``engine.acquire.prepare_target``).
+    """
+    from engine.calibrate.graycode import PixelStatus
+
+    status = np.asarray(calibration.correspondence.status)
+    return (status == PixelStatus.UNLIT) | (status == PixelStatus.OUT_OF_RANGE)
+
+
+def _calibrated_unreachable(session: Session) -> np.ndarray | None:
+    from engine.workflow import load_calibration
+
+    try:
+        return unreachable_pixels(load_calibration(session))
+    except (SessionError, InputError, KeyError, ValueError):
+        return None  # no (usable) calibration: nothing is known to be unreachable
+
+
 def _photograph_name(session: Session, edits: dict) -> str:
     records = session.captures
     names = [c.name for c in records]
@@ -97,7 +120,7 @@ def _document_from_session(session: Session, *, history=None) -> tuple[Document,
     state = session.state
     edits = state.get("edits") if isinstance(state.get("edits"), dict) else {}
     photo = session.read_capture(_photograph_name(session, edits))
-    unreachable = session.read_mask(UNREACHABLE) if UNREACHABLE in session.masks else None
+    unreachable = session.read_mask(UNREACHABLE) if UNREACHABLE in session.masks else _calibrated_unreachable(session)
     doc = Document(photo, unreachable=unreachable, history=history, source=session.rig_name)
     warnings: list[str] = []
     version = edits.get("version", EDITS_VERSION)

@@ -41,7 +41,7 @@ def test_demo_acquires_the_right_wall_like_fig6(demo):
 def test_unreachable_pixels_are_the_unlit_ones():
     from types import SimpleNamespace
 
-    from app.demo import unreachable_pixels
+    from app.files import unreachable_pixels
 
     status = np.array([[0, 1, 2, 3]], np.uint8)  # decoded, unlit, low contrast, out of range
     cal = SimpleNamespace(correspondence=SimpleNamespace(status=status))
@@ -54,6 +54,7 @@ def test_demo_session_reopens_with_its_acquisition(demo):
     assert warnings == []
     assert [t.name for t in reopened.targets] == ["right_wall"]  # the plan's targets
     np.testing.assert_array_equal(reopened.photograph, doc.photograph)
+    np.testing.assert_array_equal(reopened.unreachable, doc.unreachable)  # from the session's calibration
     np.testing.assert_array_equal(reopened.decomposition.components, doc.decomposition.components)
 
 
