@@ -168,3 +168,15 @@ def test_history_drops_redo_tail_and_unreachable_clean_state():
     assert not h.is_clean()  # the saved state (1, 2) can never come back
     h.push(Cmd(log, 4), applied=True)
     assert log == [1] and h.undo_text() == "x"
+
+
+def test_model_painting_and_rendering_never_import_qt():
+    """The editing model, painting, rendering and files are Qt-free (STYLE.md: model/view split)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, app.history, app.model, app.painting, app.display, app.render, app.files, app.demo; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('PySide6', 'shiboken6')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
