@@ -1,8 +1,4 @@
-"""Device-test options: hardware tests (``*_with_device`` tests) run only with ``--device NAME``.
-
-``pytest tests/devices --device gphoto2`` runs them against the named rig (any
-``devices.open_rig`` name); without it they are skipped. Qt runs offscreen.
-"""
+"""Device-test fixtures: the rig named with ``--device`` (registered in tests/conftest.py)."""
 
 from __future__ import annotations
 
@@ -13,31 +9,8 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 import pytest  # noqa: E402
 
 
-def pytest_addoption(parser):
-    parser.addoption(
-        "--device",
-        action="store",
-        default=None,
-        metavar="NAME",
-        help="rig name for hardware tests (e.g. gphoto2, opencv:0, hotfolder:/path); without it *_with_device tests are skipped",
-    )
-
-
 def _device_option(config) -> str | None:
-    try:
-        return config.getoption("--device")
-    except ValueError:  # the option is only registered when this conftest loads at start-up
-        return None
-
-
-def pytest_collection_modifyitems(config, items):
-    if _device_option(config):
-        return
-    skip = pytest.mark.skip(reason="hardware test: give --device NAME to run it")
-    for item in items:
-        name = item.originalname if hasattr(item, "originalname") else item.name
-        if name.endswith("_with_device") or item.path.stem.endswith("_with_device") or item.get_closest_marker("device"):
-            item.add_marker(skip)
+    return config.getoption("--device", default=None)
 
 
 @pytest.fixture
