@@ -16,6 +16,7 @@ import html
 import numpy as np
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
+    QCheckBox,
     QComboBox,
     QDoubleSpinBox,
     QFormLayout,
@@ -144,6 +145,7 @@ class AcquisitionPanel(QWidget):
         self.fixed_kappa: list = []
         self.job: Job | None = None
         self._cancelling = False
+        self._left_out: list[str] = []
         self.result = None
 
         self.order = QSpinBox(minimum=1, maximum=8, value=4)
@@ -158,12 +160,16 @@ class AcquisitionPanel(QWidget):
             self.emission.addItem(label)
         self.frames = QSpinBox(minimum=1, maximum=256, value=1)
         self.frames.setToolTip("frames averaged per capture: noise falls as 1/√frames")
+        self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach")
+        self.leave_out.setToolTip("otherwise Start refuses a target with such pixels; left-out pixels keep "
+                                  "their colour when the target is recolored")
         form = QFormLayout()
         form.addRow("Order", self.order)
         form.addRow("Adaptive", self.policy)
         form.addRow("Threshold", self.threshold)
         form.addRow("Emission", self.emission)
         form.addRow("Frames averaged", self.frames)
+        form.addRow(self.leave_out)
 
         self.targets_label = QLabel()
         self.targets_label.setWordWrap(True)
@@ -174,7 +180,7 @@ class AcquisitionPanel(QWidget):
         buttons = QHBoxLayout()
         for b in (self.start_button, self.pause_button, self.cancel_button):
             buttons.addWidget(b)
-        self.eta = ProgressEta(unit="captures")
+        self.eta = ProgressEta(unit="captures", stacked=True)
         self.thumbnails = ThumbnailStrip(size=thumb_size)
         self.status = QLabel()
         self.status.setWordWrap(True)
@@ -267,52 +273,61 @@ class AcquisitionPanel(QWidget):
 
     def check_ready(self) -> str:
         """Why a run cannot start now, in plain words; ``""`` when it can."""
+        return self._prepare()[0]
+
+    def _prepare(self) -> tuple[str, list, dict[str, int]]:
+        """(refusal reason or "", the targets to acquire, pixels left out per target)."""
         if self.busy:
-            return f"{self.job.name} is still running."
+            return f"{self.job.name} is still running.", [], {}
         if self.rig is None:
-            return "No rig is open: open and calibrate one first (Calibrate the rig…)."
+            return "No rig is open: open and calibrate one first (Calibrate the rig…).", [], {}
         if self.session is None:
-            return "No session: calibrate the rig into a session first (Calibrate the rig…)."
+            return "No session: calibrate the rig into a session first (Calibrate the rig…).", [], {}
         try:
             calibration = load_calibration(self.session)
             calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
                                          tuple(self.rig.projector.resolution))
         except (SessionError, InputError) as exc:
-            return f"{exc}. Calibrate the rig into this session first (Calibrate the rig…)."
+            return f"{exc}. Calibrate the rig into this session first (Calibrate the rig…).", [], {}
         if not self.targets:
-            return "There is no target to acquire: paint one first."
+            return "There is no target to acquire: paint one first.", [], {}
         if len(self.fixed_kappa) != len(self.targets) - 1:
             return (f"A cascade of {len(self.targets)} targets needs the fixed κ of the first "
-                    f"{len(self.targets) - 1}, got {len(self.fixed_kappa)}.")
+                    f"{len(self.targets) - 1}, got {len(self.fixed_kappa)}."), [], {}
+        targets, left_out = [], {}
         for name, mask in self.targets:
             if mask.shape != calibration.camera_resolution:
                 return (f"Target {name!r} is {mask.shape[1]}×{mask.shape[0]} pixels but the camera is "
-                        f"{calibration.camera_resolution[1]}×{calibration.camera_resolution[0]}.")
+                        f"{calibration.camera_resolution[1]}×{calibration.camera_resolution[0]}."), [], {}
             if not mask.any():
-                return f"Target {name!r} is empty: paint it first."
+                return f"Target {name!r} is empty: paint it first.", [], {}
             bad = unreachable_pixels(calibration, mask)
-            if bad.any():
+            if bad.any() and (not self.leave_out.isChecked() or bad.sum() == mask.sum()):
                 counts = calibration.correspondence.counts(bad)
                 why = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if n and k != "decoded")
                 return (f"Target {name!r}: {int(bad.sum())} of {int(mask.sum())} painted pixels cannot be reached "
                         f"by the projector ({why}). Erase them from the target (the calibration's coverage map "
-                        "shows where the projector reaches), or move the projector and recalibrate.")
+                        "shows where the projector reaches), or move the projector and recalibrate."), [], {}
+            if bad.any():
+                left_out[name] = int(bad.sum())
+                mask = mask & ~bad
+            targets.append((name, mask))
         previous = self.session.state.get("plan")
         if previous is not None:
             if previous != self._plan():
                 return (f"This session already holds a different acquisition plan (targets "
                         f"{previous.get('targets')}, order {previous.get('order')}): set the same controls to "
-                        "resume it, or acquire into a new session folder.")
-            for name, mask in self.targets:
+                        "resume it, or acquire into a new session folder."), [], {}
+            for name, mask in targets:
                 if name in self.session.masks and not np.array_equal(self.session.read_mask(name), mask):
                     return (f"Target {name!r} was painted differently when this session's acquisition began: "
-                            "acquire the new mask into a new session folder.")
-        return ""
+                            "acquire the new mask into a new session folder."), [], {}
+        return "", targets, left_out
 
     # ------------------------------------------------------------------ run
     def start(self) -> Job | None:
         """Start (or resume) the acquisition; None and a dialog if it cannot start."""
-        reason = self.check_ready()
+        reason, targets, left_out = self._prepare()
         if reason:
             self._note(reason, error=True)
             self.refused.emit(reason)
@@ -328,7 +343,7 @@ class AcquisitionPanel(QWidget):
             self._thumbnail_ready.emit(name, ThumbnailStrip.make_thumbnail(image, size))
 
         resumed = len(self._plan_captures())
-        job = Job(_acquire, self.rig, self.session, list(self.targets), int(self.order.value()),
+        job = Job(_acquire, self.rig, self.session, targets, int(self.order.value()),
                   caller=self.ui, fixed_kappa=[k.copy() for k in self.fixed_kappa],
                   settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
                   on_capture=on_capture, name="Acquiring", synchronous=self.synchronous)
@@ -340,7 +355,11 @@ class AcquisitionPanel(QWidget):
         job.ended.connect(lambda: self._on_ended(job))
         self.job = job
         self._cancelling = False
-        self._note(f"Acquiring; {resumed} captures already in the session are reused." if resumed else "Acquiring…")
+        notes = [f"{resumed} captures already in the session are reused." if resumed else "Acquiring…"]
+        self._left_out = [f"{n} pixels of {name!r} the projector cannot reach were left out."
+                          for name, n in left_out.items()]
+        notes += self._left_out
+        self._note("\n".join(notes))
         self.busy_changed.emit(True)
         self.started.emit(job)
         job.start()
@@ -396,7 +415,7 @@ class AcquisitionPanel(QWidget):
     def _on_finished(self, result) -> None:
         self.result = result
         lines = [f"Captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots)."]
-        lines += [f"{name}: {prepared.report()}" for name, prepared in result.targets]
+        lines += self._left_out + [f"{name}: {prepared.report()}" for name, prepared in result.targets]
         self._note("\n".join(lines))
         self.eta.set_note("done")
         self.acquired.emit(result)
@@ -428,7 +447,7 @@ class AcquisitionPanel(QWidget):
 
     def _update(self) -> None:
         busy = self.busy
-        for w in (self.order, self.policy, self.emission, self.frames):
+        for w in (self.order, self.policy, self.emission, self.frames, self.leave_out):
             w.setEnabled(not busy)
         self.threshold.setEnabled(not busy and POLICIES[self.policy.currentIndex()][1] != "brute")
         self.start_button.setEnabled(not busy)

@@ -463,6 +463,8 @@ class CalibrationPage(QWizardPage):
     def __init__(self, wizard: "CalibrationWizard"):
         super().__init__()
         self.setTitle("Calibrate")
+        self.setSubTitle("Black, white, the Gray code and a grey ramp. Each capture is written to the session as "
+                         "it is taken: a cancelled or crashed calibration resumes where it stopped.")
         self.w = wizard
         self.mode_run = QRadioButton("Calibrate now")
         self.mode_reuse = QRadioButton("Use the calibration of an existing session (same rig)")
@@ -472,6 +474,7 @@ class CalibrationPage(QWizardPage):
         group.addButton(self.mode_reuse)
 
         self.levels = QSpinBox(minimum=3, maximum=256, value=17)
+        self.levels.setMaximumWidth(90)
         self.crosstalk = QCheckBox("also measure colour crosstalk (3 more captures)")
         self.start = QPushButton("Start")
         self.pause = QPushButton("Pause")
@@ -485,13 +488,14 @@ class CalibrationPage(QWizardPage):
         grid.setContentsMargins(24, 0, 0, 0)
         grid.addWidget(QLabel("Grey levels of the response ramp"), 0, 0)
         grid.addWidget(self.levels, 0, 1)
-        grid.addWidget(self.crosstalk, 1, 0, 1, 2)
+        grid.addWidget(self.crosstalk, 1, 0, 1, 3)
         buttons = QHBoxLayout()
         for b in (self.start, self.pause, self.cancel):
             buttons.addWidget(b)
         buttons.addStretch(1)
-        grid.addLayout(buttons, 2, 0, 1, 2)
-        grid.addWidget(self.eta, 3, 0, 1, 2)
+        grid.setColumnStretch(2, 1)
+        grid.addLayout(buttons, 2, 0, 1, 3)
+        grid.addWidget(self.eta, 3, 0, 1, 3)
         self.run_box = run_box
 
         self.reuse_path = QLineEdit()
@@ -516,8 +520,8 @@ class CalibrationPage(QWizardPage):
         lay.addWidget(self.mode_reuse)
         lay.addWidget(reuse_box)
         lay.addWidget(self.info)
-        lay.addStretch(1)
         lay.addWidget(self.status)
+        lay.addStretch(1)
 
         self.mode_run.toggled.connect(self._update)
         self.start.clicked.connect(self._on_start)
@@ -560,9 +564,12 @@ class CalibrationPage(QWizardPage):
             have = sum(1 for c in w.session.captures if c.name.startswith("cal-"))
             total = self.budget()
             self.start.setText("Resume" if 0 < have < total and w.calibration is None else "Start")
-            self.info.setText(f"{total} captures: black, white, Gray code and the response ramp"
-                              + (", crosstalk" if self.crosstalk.isChecked() else "")
-                              + (f"; {have} already in the session will be reused." if have else "."))
+            if w.calibration is not None:
+                self.info.setText(f"The session is calibrated ({have} captures).")
+            else:
+                self.info.setText(f"{total} captures: black, white, Gray code and the response ramp"
+                                  + (", crosstalk" if self.crosstalk.isChecked() else "")
+                                  + (f"; {have} already in the session will be reused." if have else "."))
         self.completeChanged.emit()
 
     def isComplete(self) -> bool:  # noqa: N802 (Qt name)
@@ -667,6 +674,7 @@ class SummaryPage(QWizardPage):
     def __init__(self, wizard: "CalibrationWizard"):
         super().__init__()
         self.setTitle("Summary")
+        self.setSubTitle("What was measured, and anything to fix before acquiring.")
         self.w = wizard
         self.text = QTextBrowser()
         self.text.setOpenLinks(False)
@@ -913,8 +921,9 @@ class CalibrationWizard(QWizard):
         if cal is not None:
             counts = cal.correspondence.counts()
             total = max(sum(counts.values()), 1)
-            if counts["decoded"] < 0.9 * total:
-                fixes = []
+            if counts["decoded"] < 0.98 * total:
+                fixes = ["targets can only be edited where the projector reaches: keep them on the green "
+                         "pixels of the coverage map"]
                 if counts["unlit"]:
                     fixes.append("unlit pixels are in the projector's shadow: targets there cannot be edited; "
                                  "place the projector closer to the camera's viewpoint")

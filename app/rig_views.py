@@ -34,6 +34,7 @@ from PySide6.QtWidgets import (
     QListWidgetItem,
     QProgressBar,
     QSizePolicy,
+    QVBoxLayout,
     QWidget,
 )
 
@@ -343,9 +344,10 @@ class CoverageMap(QWidget):
         for code, (colour, _) in STATUS_COLOURS.items():
             c = QColor(colour)
             rgb[s == code] = (c.red(), c.green(), c.blue())
-        if background is not None:
+        if background is not None:  # shade decoded pixels by the scene; problems keep full colour
             grey = display_rgb(np.asarray(background, np.float32)).mean(axis=-1, dtype=np.float32) / 255.0
-            rgb *= (0.45 + 0.55 * grey)[..., None]
+            decoded = s == PixelStatus.DECODED
+            rgb[decoded] *= (0.45 + 0.55 * grey[decoded])[:, None]
         self._image = rgb_to_qimage(np.clip(rgb, 0, 255).astype(np.uint8))
         n = np.bincount(s.ravel().astype(np.int64), minlength=len(PixelStatus))
         self.counts = {p: int(n[p]) for p in PixelStatus}
@@ -493,6 +495,7 @@ class ThumbnailStrip(QListWidget):
         self.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAsNeeded)
         self.setVerticalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.setIconSize(QSize(self.thumb_size, self.thumb_size))
+        self.setTextElideMode(Qt.TextElideMode.ElideMiddle)
         self.setGridSize(QSize(self.thumb_size + 16, self.thumb_size + 22))
         font = QFont(self.font())
         font.setPointSizeF(max(font.pointSizeF() * 0.8, 6))
@@ -508,7 +511,7 @@ class ThumbnailStrip(QListWidget):
         """Append a thumbnail made by :meth:`make_thumbnail`."""
         pix = QPixmap.fromImage(rgb_to_qimage(rgb)).scaled(
             self.thumb_size, self.thumb_size, Qt.AspectRatioMode.KeepAspectRatio, Qt.TransformationMode.FastTransformation)
-        item = QListWidgetItem(QIcon(pix), name)
+        item = QListWidgetItem(QIcon(pix), name.removeprefix("acq-").removeprefix("cal-"))
         item.setToolTip(name)
         item.setData(Qt.ItemDataRole.UserRole, name)
         self.addItem(item)
@@ -533,10 +536,12 @@ class ProgressEta(QWidget):
         What a step is ("images", "captures").
     clock : callable
         Seconds, monotonic (tests pass a fake one).
+    stacked : bool
+        Put the label under the bar (narrow docks) instead of beside it.
     """
 
     def __init__(self, parent: QWidget | None = None, *, unit: str = "images",
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, stacked: bool = False):
         super().__init__(parent)
         self.unit = unit
         self.clock = clock
@@ -547,7 +552,7 @@ class ProgressEta(QWidget):
         self.bar.setFormat(f"0 / 0 {unit}")
         self.label = QLabel()
         self.label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        lay = QHBoxLayout(self)
+        lay = QVBoxLayout(self) if stacked else QHBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addWidget(self.bar, 2)
         lay.addWidget(self.label, 3)

@@ -86,7 +86,7 @@ def _expected_captures(order: int, targets: int = 1) -> int:
 
 
 def _acq(session) -> dict[str, str]:
-    return {c.name: c.sha256 for c in Session.open(session.path).captures if c.name.startswith("acq-")}
+    return {c.name: (c.sha256, c.time, c.index) for c in Session.open(session.path).captures if c.name.startswith("acq-")}
 
 
 def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_panel, qtbot, dialogs):
@@ -215,3 +215,40 @@ def test_settings_reach_the_engine(fresh, make_panel):
     assert "needs the fixed κ of the first 1, got 0" in panel.check_ready()
     panel.set_targets([("a", rig.targets["left_wall"]), ("b", rig.targets["right_wall"])], [0.5])
     assert panel.check_ready() == "" and "κ fixed 0.5, 0.5, 0.5" in panel.targets_label.text()
+
+
+def test_leave_out_trims_only_the_unreachable_pixels(wedge_offset, make_panel, qtbot, tmp_path, dialogs):
+    rig, template = wedge_offset
+    shutil.copytree(template, tmp_path / "s")
+    session = Session.open(tmp_path / "s")
+    calibration = load_calibration(session)
+    shadow = calibration.correspondence.status == PixelStatus.UNLIT
+    painted = rig.targets["left"] | shadow  # painted over the edge into the projector's shadow
+    bad = unreachable_pixels(calibration, painted)
+    assert bad.any() and not bad.all()
+    panel = make_panel(rig, session, [("left", painted)])
+    panel.order.setValue(2)
+    assert "cannot be reached by the projector" in panel.check_ready()
+    panel.leave_out.setChecked(True)
+    assert panel.check_ready() == ""
+    with qtbot.waitSignal(panel.acquired, timeout=TIMEOUT_MS):
+        panel.start_button.click()
+    np.testing.assert_array_equal(Session.open(session.path).read_mask("left"), painted & ~bad)
+    assert f"{int(bad.sum())} pixels of 'left' the projector cannot reach were left out" in panel.status.text()
+    assert dialogs == []
+
+
+def test_progress_shows_count_and_time_left_from_real_captures_only(qtbot):
+    from app.rig_views import ProgressEta
+
+    now = [100.0]
+    eta = ProgressEta(unit="images", clock=lambda: now[0])
+    qtbot.addWidget(eta)
+    eta.update_progress(4, 10, "captured cal-003")  # reused from the session: instant, not a rate
+    assert eta.seconds_left is None and eta.bar.format() == "4 / 10 images"
+    eta.update_progress(4, 10, "capturing cal-004")
+    now[0] += 6.0
+    eta.update_progress(7, 10, "capturing cal-007")  # 3 captures in 6 s: 2 s each, 3 to go
+    assert eta.seconds_left == pytest.approx(6.0) and "about 6 s left" in eta.label.text()
+    assert eta.bar.value() == 7 and eta.bar.maximum() == 10
+

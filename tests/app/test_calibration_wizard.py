@@ -71,7 +71,7 @@ def _to_calibration_page(w: CalibrationWizard, qtbot) -> None:
 
 
 def _snapshot(session_path) -> dict[str, str]:
-    return {c.name: c.sha256 for c in Session.open(session_path).captures}
+    return {c.name: (c.sha256, c.time, c.index) for c in Session.open(session_path).captures}
 
 
 def test_rig_page_greys_out_unavailable_rigs_with_their_reason(make_wizard, monkeypatch):
