@@ -11,8 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine.acquire import Adaptive, PreparedTarget
-from engine.calibrate import Correspondence
+from engine.acquire import Adaptive
 from engine.recolor import recolor
 
 RES = (48, 48)
@@ -197,14 +196,3 @@ def test_rows_compare_with_the_paper_on_error_and_image_count(images, error, ver
     row = paper.Row("8", "case", "ideal", "coaxial", images, error, error, 16, 0.012)
     assert row.verdict() == verdict
 
-
-def test_screening_drops_target_pixels_whose_projector_pixel_lights_another_surface():
-    # camera row of 4 pixels; pixels 1 (target) and 2 (floor) share projector pixel 1
-    x = np.array([[0, 1, 1, 2]])
-    corr = Correspondence.from_maps(x, np.zeros_like(x), np.ones((1, 4), bool), (1, 3))
-    target = np.array([[True, True, False, False]])
-    prepared = PreparedTarget(target, np.zeros_like(target), np.ones((1, 4, 3), np.float32), corr)
-    out = paper.screen_shared_projector_pixels(prepared, target)
-    assert out.mask.tolist() == [[True, False, False, False]]
-    assert out.unreachable.tolist() == [[False, True, False, False]]
-    assert (out.direct[0, 1] == 0).all() and (out.direct[0, 0] == 1).all()
