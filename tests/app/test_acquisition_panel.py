@@ -7,6 +7,7 @@ import os
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 import shutil  # noqa: E402
+import threading  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -89,29 +90,40 @@ def _acq(session) -> dict[str, str]:
     return {c.name: (c.sha256, c.time, c.index) for c in Session.open(session.path).captures if c.name.startswith("acq-")}
 
 
-def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_panel, qtbot, dialogs):
+def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_panel, qtbot, dialogs, monkeypatch):
     rig, session = fresh
+    # the worker's second camera shot waits until the test has seen the pause: no race with the worker
+    shots, go = [], threading.Event()
+    capture = rig.camera.capture
+
+    def gated_capture():
+        shots.append(threading.current_thread().name)
+        if len(shots) == 2:
+            go.wait(TIMEOUT_MS / 1000)
+        return capture()
+
+    monkeypatch.setattr(rig.camera, "capture", gated_capture)
     panel = make_panel(rig, session, [("right_wall", rig.targets["right_wall"])])
     panel.order.setValue(2)
     assert panel.start_button.text() == "Start" and not panel.threshold.isEnabled()
     assert "right_wall" in panel.targets_label.text()
-    paused = []
-
-    def pause_once(name):
-        if not paused:
-            paused.append(name)
-            panel.pause_button.setChecked(True)
-
-    panel.thumbnail_added.connect(pause_once)
+    panel.thumbnail_added.connect(lambda name: panel.pause_button.setChecked(True))
     started = []
     panel.started.connect(started.append)
     panel.start_button.click()
     qtbot.waitUntil(lambda: bool(started) and started[0].is_paused, timeout=TIMEOUT_MS)
     assert panel.pause_button.text() == "Resume" and not panel.start_button.isEnabled()
     assert not panel.order.isEnabled()  # settings are locked while a run holds the rig
+    go.set()  # the worker may be held before its second shot or right after it: either way, it is held
+    qtbot.waitUntil(lambda: len(_acq(session)) == len(shots), timeout=TIMEOUT_MS)
+    held = len(_acq(session))
+    qtbot.wait(200)
+    assert held in (1, 2) and len(_acq(session)) == held and len(shots) == held and started[0].is_paused
+    panel.thumbnail_added.disconnect()
     with qtbot.waitSignal(panel.acquired, timeout=TIMEOUT_MS) as blocker:
         panel.pause_button.setChecked(False)
     result = blocker.args[0]
+    assert threading.main_thread().name not in shots  # every shot on the worker
 
     assert result.images == 2 and result.acquisition.observations.shape == (2, RES, RES, 3)
     names = list(_acq(session))
