@@ -155,7 +155,7 @@ class MainWindow(QMainWindow):
         self._build_docks()
         self._build_status()
         if document is not None:
-            self.set_document(document, session)
+            self.set_document(document, session, rig=rig)
         self._update_title()
         self._update_actions()
 
@@ -223,6 +223,7 @@ class MainWindow(QMainWindow):
         self.act_zoom_in = self._action("Zoom &In", lambda: self.canvas and self.canvas.zoom_by(1.25), K.ZoomIn)
         self.act_zoom_out = self._action("Zoom &Out", lambda: self.canvas and self.canvas.zoom_by(0.8), K.ZoomOut)
         self.act_acquire = self._action("&Acquire…", self.acquire, tip="Measure the targets on the rig (cascade)")
+        self.act_calibrate = self._action("&Calibrate Rig…", self.calibrate, tip="Calibrate a camera–projector rig into a session")
         self.act_discard = self._action("&Discard Acquisition", self._on_discard)
         self.act_about = self._action("&About Albedit", self._on_about)
 
@@ -257,6 +258,7 @@ class MainWindow(QMainWindow):
         for a in (self.act_fit, self.act_100, self.act_zoom_in, self.act_zoom_out):
             m.addAction(a)
         m = mb.addMenu("&Rig")
+        m.addAction(self.act_calibrate)
         m.addAction(self.act_acquire)
         m.addAction(self.act_discard)
         m = mb.addMenu("&Help")
@@ -520,6 +522,22 @@ class MainWindow(QMainWindow):
             self.doc.discard_acquisition()
             self.preview.rebuild()
 
+    def calibrate(self) -> None:
+        """Run the calibration wizard on the current rig (or one it opens) into a session."""
+        from app.calibration_wizard import CalibrationWizard
+
+        wizard = CalibrationWizard(self, rig=self.rig, keep_rig=self.rig is None)
+        wizard.finished_session.connect(lambda session: self._on_calibrated(wizard, session))
+        wizard.open()
+
+    def _on_calibrated(self, wizard, session) -> None:
+        if self.rig is None and wizard.rig is not None:
+            self.rig = wizard.rig
+        if self.session is None:
+            self.session = session
+        self.statusBar().showMessage(f"Calibrated into {session.path}", 10000)
+        self._update_actions()
+
     def acquire(self) -> None:
         """Check the targets can be acquired, then measure them on the rig (cascade order)."""
         if self.doc is None:
@@ -529,9 +547,41 @@ class MainWindow(QMainWindow):
         except InputError as exc:
             self.show_error("Cannot acquire", exc)
             return
-        self.show_error("Cannot acquire here yet", InputError(
-            "the targets can be acquired, but the acquisition panel is not part of this build: "
-            "run `albedit capture` on a session, then open it here"))
+        from app.acquisition_panel import AcquisitionPanel
+
+        targets = [(t.name, t.mask) for t in self.doc.targets]
+        fixed = [t.kappa for t in self.doc.targets[:-1]]
+        if getattr(self, "_acquisition_dock", None) is None:
+            panel = AcquisitionPanel(self.rig, self.session, targets, fixed, parent=self, synchronous=self.synchronous)
+            panel.acquired.connect(self._on_acquired)
+            dock = QDockWidget("Acquisition", self)
+            dock.setObjectName("acquisition")
+            dock.setWidget(panel)
+            self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
+            self._acquisition_dock = dock
+        else:
+            panel = self._acquisition_dock.widget()
+            panel.set_rig(self.rig)
+            panel.set_session(self.session)
+            panel.set_targets(targets, fixed)
+        self._acquisition_dock.show()
+        self._acquisition_dock.raise_()
+
+    def _on_acquired(self, result) -> None:
+        """A finished cascade becomes the document's acquisition; the last target stays free."""
+        from engine.workflow import load_decomposition, plan_key
+
+        by_name = {t.name: t.uid for t in self.doc.targets}
+        try:
+            cascade = [by_name[name] for name, _ in result.targets]
+            self.doc.set_acquisition(cascade, load_decomposition(self.session), key=plan_key(self.session))
+        except (KeyError, InputError) as exc:
+            self.show_error("Cannot use the acquisition", exc)
+            return
+        self.preview.rebuild()
+        self.statusBar().showMessage(
+            f"Acquired {result.images} images ({result.predicted} predicted); drag the κ sliders of "
+            f"{result.targets[-1][0]!r}", 15000)
 
     def _guard(self, fn, *args):
         try:
