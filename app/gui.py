@@ -12,7 +12,6 @@ import sys
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 
-from app import _refcount_guard
 from app.main_window import APP_NAME, MainWindow
 
 
@@ -31,7 +30,6 @@ def main(argv: list[str] | None = None) -> int:
         The event loop's exit code.
     """
     args = list(sys.argv[1:] if argv is None else argv)
-    _refcount_guard.install()  # PySide6 6.12 on Python 3.11 leaks refs to None/True (see the module)
     app = QApplication.instance() or QApplication([sys.argv[0] if sys.argv else "albedit"])
     app.setApplicationName(APP_NAME)
     app.setOrganizationName(APP_NAME)

@@ -28,7 +28,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app import _refcount_guard, files
+from app import files
 from app.canvas import Canvas
 from app.history import History
 from app.model import Document
@@ -133,7 +133,6 @@ class MainWindow(QMainWindow):
     def __init__(self, document: Document | None = None, session=None, *, synchronous: bool = False,
                  settings: QSettings | None = None, rig=None):
         super().__init__()
-        _refcount_guard.install()  # before the first of many Qt calls (see app._refcount_guard)
         self.synchronous = synchronous
         self.settings = settings if settings is not None else QSettings(APP_NAME, APP_NAME)
         self.doc: Document | None = None

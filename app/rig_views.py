@@ -14,7 +14,6 @@ Display conversions clip to [0, 1] here, for the screen only; measurement data s
 
 from __future__ import annotations
 
-import ctypes
 import math
 import sys
 import threading
@@ -65,31 +64,6 @@ STATUS_COLOURS: dict[PixelStatus, tuple[str, str]] = {
     PixelStatus.LOW_CONTRAST: ("#f0a030", "low contrast"),
     PixelStatus.OUT_OF_RANGE: ("#d0306a", "outside the projector"),
 }
-def _pin_interpreter_singletons() -> bool:
-    """Work around an abi3 PySide6 built against Python ≥ 3.12 headers, run on 3.11.
-
-    Such a build returns ``None`` (every void Qt call) and ``True`` (``Signal.emit``) without
-    the reference count increment that Python 3.12 no longer needs (PEP 683 immortal
-    objects), so each call steals a reference and, some ten thousand calls later, the process
-    aborts with "Fatal Python error: none_dealloc" (PySide6 6.12.0 on CPython 3.11 does this).
-    When a probe shows the leak, give ``None``, ``True`` and ``False`` a reference count no
-    leak can exhaust — what 3.12 does for them anyway. Returns whether it was needed.
-    """
-    if sys.implementation.name != "cpython" or sys.version_info >= (3, 12):
-        return False
-    probe = QObject()
-    before = sys.getrefcount(None)
-    for _ in range(64):
-        probe.setObjectName("albedit-refcount-probe")
-    if before - sys.getrefcount(None) < 32:
-        return False
-    for singleton in (None, True, False):
-        ctypes.c_ssize_t.from_address(id(singleton)).value += 1 << 40
-    return True
-
-
-#: True when :func:`_pin_interpreter_singletons` found the PySide6 reference leak and pinned.
-PYSIDE_REFCOUNT_WORKAROUND = _pin_interpreter_singletons()
 
 _SATURATED = QColor(255, 0, 200)
 _CHANNELS = (("R", QColor(220, 50, 50)), ("G", QColor(40, 160, 60)), ("B", QColor(50, 90, 230)))

@@ -9,12 +9,6 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from app import _refcount_guard  # noqa: E402
-
-# PySide6 6.12 on Python 3.11 drops a reference to None on every void Qt call and to True on
-# every emit; a long test run would abort the interpreter (see app/_refcount_guard.py).
-_refcount_guard.install()
-
 from app.model import Document  # noqa: E402
 from engine.decompose import Decomposition, observe  # noqa: E402
 from engine.recolor import recolor  # noqa: E402
