@@ -809,6 +809,9 @@ class MainWindow(QMainWindow):
         if not self.maybe_save():
             event.ignore()
             return
+        dock = getattr(self, "_acquisition_dock", None)
+        if dock is not None:
+            dock.widget().shutdown()  # a running acquisition stops; its captures stay in the session
         self._teardown()
         event.accept()
 

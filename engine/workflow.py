@@ -80,10 +80,9 @@ def run_capture(
     engine.acquire.CascadeResult
     """
     calibration = load_calibration(session)
-    for name, mask in targets:
-        session.write_mask(name, np.asarray(mask, bool))
     plan = {
         "targets": [name for name, _ in targets],
+        "masks": [hashlib.sha256(np.packbits(np.asarray(m, bool)).tobytes()).hexdigest()[:16] for _, m in targets],
         "order": int(order),
         "fixed_kappa": [np.broadcast_to(np.asarray(k, float), (3,)).tolist() for k in fixed_kappa],
         "settings": settings.to_dict(),
@@ -96,6 +95,8 @@ def run_capture(
             f"session {session.path} already holds a different acquisition plan ({_describe(previous)}); "
             "use a new session folder for a new plan"
         )
+    for name, mask in targets:  # only once the plan is known to be this session's
+        session.write_mask(name, np.asarray(mask, bool))
     session.update(plan=plan, status="capturing")
     recorder = Recorder(rig, session, progress=progress, should_stop=should_stop, on_capture=on_capture, frames=frames)
     result = acquire_cascade(

@@ -172,3 +172,19 @@ def test_rgb_emission_corrects_crosstalk_per_pixel_with_a_third_of_the_captures(
     assert shots == {True: 1 + 3 * 3, False: 1 + 3}
     # measured at 64x64: 0.116 % per primary, 0.157 % in RGB
     assert errors[False] < 3e-3 and errors[False] < 2 * errors[True] + 1e-3, errors
+
+
+def test_a_repainted_target_is_a_different_plan(rig, tmp_path):
+    from engine.errors import SessionError
+
+    with rig(ideal=True) as r:
+        s = _session(tmp_path / "s", r)
+        run_calibration(r, s)
+        mask = r.targets["right_wall"]
+        run_capture(r, s, [("right_wall", mask)], 2)
+        before = s.read_mask("right_wall")
+        smaller = mask.copy()
+        smaller[np.argwhere(mask)[0][0]] = False
+        with pytest.raises(SessionError, match="different acquisition plan"):
+            run_capture(r, s, [("right_wall", smaller)], 2)
+        np.testing.assert_array_equal(Session.open(tmp_path / "s").read_mask("right_wall"), before)
