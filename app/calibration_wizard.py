@@ -59,9 +59,10 @@ from engine.calibrate import exposure_report
 from engine.errors import DeviceError, InputError, SessionError
 from engine.progress import checkpoint
 from engine.session import Session
+from engine.workflow import open_session_for_rig
 from engine.workflow import load_calibration, run_calibration, save_calibration
 
-__all__ = ["CalibrationWizard", "open_session_for_rig"]
+__all__ = ["CalibrationWizard"]
 
 _RED = "#c0392b"
 
@@ -73,35 +74,6 @@ _NO_SCREEN_BACKENDS = ("virtual", "replay")
 
 
 # ---------------------------------------------------------------------------------- helpers
-def open_session_for_rig(path, rig) -> Session:
-    """Open the session at ``path`` (adopting orphan captures) or create one for ``rig``.
-
-    Raises
-    ------
-    SessionError
-        ``path`` is a session of another rig or resolution, or cannot be created.
-    """
-    path = Path(path)
-    if (path / "manifest.json").exists():
-        session = Session.open(path)
-        session.recover_orphans()
-        theirs = (session.rig_name, tuple(session.camera_resolution), tuple(session.projector_resolution))
-        ours = (rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
-        if theirs != ours:
-            raise SessionError(
-                f"session {path} belongs to rig {theirs[0]!r} (camera {theirs[1]}, projector {theirs[2]}), "
-                f"not to {ours[0]!r} (camera {ours[1]}, projector {ours[2]}); choose a new session folder"
-            )
-        return session
-    return Session.create(
-        path,
-        rig_name=rig.identity,
-        camera_resolution=tuple(rig.camera.resolution),
-        projector_resolution=tuple(rig.projector.resolution),
-        metadata={"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8))},
-    )
-
-
 def _open_rig(name: str, options: dict, *, progress=None, should_stop=None):
     """Open a rig on a worker (virtual set-ups report their build progress)."""
     checkpoint(should_stop, "opening the rig")

@@ -15,14 +15,13 @@ Display conversions clip to [0, 1] here, for the screen only; measurement data s
 from __future__ import annotations
 
 import math
-import sys
 import threading
 import time
 import weakref
 from typing import Callable
 
 import numpy as np
-from PySide6.QtCore import QCoreApplication, QEventLoop, QObject, QPointF, QRectF, QSize, Qt
+from PySide6.QtCore import QCoreApplication, QEventLoop, QPointF, QRectF, QSize, Qt
 from PySide6.QtGui import QColor, QFont, QIcon, QImage, QPainter, QPainterPath, QPen, QPixmap
 from PySide6.QtWidgets import (
     QAbstractItemView,

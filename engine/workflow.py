@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +22,35 @@ from engine.progress import Progress, ShouldStop
 from engine.session import Session
 
 _CALIBRATION_GROUP = "rig"
+
+
+def open_session_for_rig(path, rig) -> Session:
+    """Open the session at ``path`` (adopting orphan captures) or create one for ``rig``.
+
+    Raises
+    ------
+    SessionError
+        ``path`` is a session of another rig or resolution, or cannot be created.
+    """
+    path = Path(path)
+    if (path / "manifest.json").exists():
+        session = Session.open(path)
+        session.recover_orphans()
+        theirs = (session.rig_name, tuple(session.camera_resolution), tuple(session.projector_resolution))
+        ours = (rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+        if theirs != ours:
+            raise SessionError(
+                f"session {path} belongs to rig {theirs[0]!r} (camera {theirs[1]}, projector {theirs[2]}), "
+                f"not to {ours[0]!r} (camera {ours[1]}, projector {ours[2]}); choose a new session folder"
+            )
+        return session
+    return Session.create(
+        path,
+        rig_name=rig.identity,
+        camera_resolution=tuple(rig.camera.resolution),
+        projector_resolution=tuple(rig.projector.resolution),
+        metadata={"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8))},
+    )
 
 
 def save_calibration(session: Session, calibration: Calibration) -> None:

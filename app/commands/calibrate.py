@@ -7,8 +7,7 @@ from pathlib import Path
 
 from app.cli import ProgressBar
 from app.commands._args import add_rig_options, open_rig
-from engine.session import Session
-from engine.workflow import run_calibration
+from engine.workflow import open_session_for_rig, run_calibration
 
 
 def add_arguments(parser) -> None:
@@ -18,24 +17,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--crosstalk", action="store_true", help="also measure projector-primary to camera-channel crosstalk")
 
 
-def open_or_create(path: Path, rig) -> Session:
-    """Open ``path`` if it is a session, else create one for ``rig``."""
-    if (path / "manifest.json").exists():
-        session = Session.open(path)
-        session.recover_orphans()
-        return session
-    return Session.create(
-        path,
-        rig_name=rig.identity,
-        camera_resolution=tuple(rig.camera.resolution),
-        projector_resolution=tuple(rig.projector.resolution),
-        metadata={"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8))},
-    )
-
-
 def run(args) -> int:
     with open_rig(args) as rig:
-        session = open_or_create(args.session, rig)
+        session = open_session_for_rig(args.session, rig)
         cal = run_calibration(rig, session, levels=args.levels, crosstalk=args.crosstalk, progress=ProgressBar())
     print(f"calibrated {rig.name} into {args.session}", file=sys.stderr)
     print(cal.metadata.get("coverage", ""), file=sys.stderr)

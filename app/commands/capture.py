@@ -13,8 +13,7 @@ from engine.acquire import Adaptive, CaptureSettings
 from engine.errors import InputError, SessionError
 from engine.imageio import read_image
 from engine.session import Session
-from app.commands.calibrate import open_or_create
-from engine.workflow import load_calibration, run_capture, save_calibration
+from engine.workflow import load_calibration, open_session_for_rig, run_capture, save_calibration
 
 
 def add_arguments(parser) -> None:
@@ -57,7 +56,7 @@ def run(args) -> int:
         if args.calibration is not None:
             calibration = load_calibration(Session.open(args.calibration))
             calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
-            session = open_or_create(args.session, rig)
+            session = open_session_for_rig(args.session, rig)
             if session.read_calibration()[0]:
                 if session.read_calibration()[0] != calibration.to_dict()[0]:
                     raise SessionError(f"session {args.session} already has a different calibration; use a new session folder")

@@ -60,6 +60,7 @@ __all__ = [
     "black_frame",
     "crosstalk_patterns",
     "decode_gray_code",
+    "fill_correspondence",
     "direct_image",
     "estimate_hole_radius",
     "exposure_report",

@@ -8,7 +8,7 @@ import pytest
 
 from devices._linearize import ResponseCurve, calibrate_response, response_curve
 from devices.base import Frame
-from devices.opencv_camera import OpenCVCamera, open_camera, open_rig
+from devices.opencv_camera import open_camera, open_rig
 from engine.errors import DeviceError, InputError
 
 H, W = 48, 64

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from engine.acquire import Adaptive, CaptureSettings, Recorder, acquire_cascade
+from engine.acquire import Adaptive, Recorder, acquire_cascade
 from engine.decompose import decompose
 from engine.errors import Cancelled, InputError
 from engine.recolor import recolor

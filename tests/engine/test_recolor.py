@@ -53,7 +53,7 @@ def test_preview_is_the_area_average_of_the_full_recolor():
     kappa = np.array([0.5, 1.5, 3.0])
     pack = prepare_preview(d, (40, 40))
     small = recolor_preview(pack, kappa)
-    f = 4  # ceil(130 / 40)
+    # factor 4 = ceil(130 / 40)
     assert small.shape == (25, 33, 3) and pack.scale[0] == pytest.approx(97 / 25)
     full = recolor(d, kappa)
     np.testing.assert_allclose(small[3, 5], full[12:16, 20:24].mean(axis=(0, 1)), rtol=1e-5)
