@@ -256,15 +256,12 @@ class AcquisitionPanel(QWidget):
 
     def _plan(self) -> dict:
         """The plan :func:`run_capture` will store (compared with the session's before a run)."""
-        adaptive = self.adaptive()
-        return {
-            "targets": [n for n, _ in self.targets],
-            "order": int(self.order.value()),
-            "fixed_kappa": [k.tolist() for k in self.fixed_kappa],
-            "settings": self.capture_settings().to_dict(),
-            "adaptive": None if adaptive is None else adaptive.to_dict(),
-            "photograph_pattern": False,
-        }
+        from engine.workflow import capture_plan
+
+        return capture_plan(
+            self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
+            settings=self.capture_settings(), adaptive=self.adaptive(),
+        )
 
     def _plan_captures(self) -> list[str]:
         if self.session is None:

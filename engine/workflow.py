@@ -83,6 +83,27 @@ def run_calibration(
     return calibration
 
 
+def capture_plan(
+    targets, order: int, *, fixed_kappa=(), settings: CaptureSettings = CaptureSettings(),
+    adaptive: Adaptive | None = None, photograph_pattern: bool = False,
+) -> dict:
+    """The JSON plan :func:`run_capture` stores, and compares with a session's before a run.
+
+    Two runs with equal plans take the same captures (a rerun resumes); anything that changes
+    the emitted patterns — targets (names and painted pixels), order, fixed κ, settings —
+    changes the plan.
+    """
+    return {
+        "targets": [name for name, _ in targets],
+        "masks": [hashlib.sha256(np.packbits(np.asarray(m, bool)).tobytes()).hexdigest()[:16] for _, m in targets],
+        "order": int(order),
+        "fixed_kappa": [np.broadcast_to(np.asarray(k, float), (3,)).tolist() for k in fixed_kappa],
+        "settings": settings.to_dict(),
+        "adaptive": None if adaptive is None else adaptive.to_dict(),
+        "photograph_pattern": bool(photograph_pattern),
+    }
+
+
 def run_capture(
     rig,
     session: Session,
@@ -110,15 +131,10 @@ def run_capture(
     engine.acquire.CascadeResult
     """
     calibration = load_calibration(session)
-    plan = {
-        "targets": [name for name, _ in targets],
-        "masks": [hashlib.sha256(np.packbits(np.asarray(m, bool)).tobytes()).hexdigest()[:16] for _, m in targets],
-        "order": int(order),
-        "fixed_kappa": [np.broadcast_to(np.asarray(k, float), (3,)).tolist() for k in fixed_kappa],
-        "settings": settings.to_dict(),
-        "adaptive": None if adaptive is None else adaptive.to_dict(),
-        "photograph_pattern": photograph_pattern is not None,
-    }
+    plan = capture_plan(
+        targets, order, fixed_kappa=fixed_kappa, settings=settings, adaptive=adaptive,
+        photograph_pattern=photograph_pattern is not None,
+    )
     previous = session.state.get("plan")
     if previous is not None and previous != plan:
         raise SessionError(
