@@ -84,7 +84,7 @@ def run_calibration(
 
 
 def capture_plan(
-    targets, order: int, *, fixed_kappa=(), settings: CaptureSettings = CaptureSettings(),
+    targets, order, *, fixed_kappa=(), settings: CaptureSettings = CaptureSettings(),
     adaptive: Adaptive | None = None, photograph_pattern: bool = False,
 ) -> dict:
     """The JSON plan :func:`run_capture` stores, and compares with a session's before a run.
@@ -96,7 +96,7 @@ def capture_plan(
     return {
         "targets": [name for name, _ in targets],
         "masks": [hashlib.sha256(np.packbits(np.asarray(m, bool)).tobytes()).hexdigest()[:16] for _, m in targets],
-        "order": int(order),
+        "order": order if order == "auto" else int(order),
         "fixed_kappa": [np.broadcast_to(np.asarray(k, float), (3,)).tolist() for k in fixed_kappa],
         "settings": settings.to_dict(),
         "adaptive": None if adaptive is None else adaptive.to_dict(),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -25,7 +26,9 @@ def add_arguments(parser) -> None:
         "--target", action="append", required=True, metavar="NAME[=MASK.png]",
         help="target in cascade order (repeat for a cascade); NAME alone uses the rig's named target",
     )
-    parser.add_argument("--order", type=int, default=4, help="decomposition order K (default %(default)s)")
+    parser.add_argument("--order", type=_order, default=4,
+                        help="decomposition order K, or 'auto': capture until the linear prediction of the newest "
+                             "image is within --threshold (one target; default %(default)s)")
     parser.add_argument("--fixed-kappa", type=kappa, action="append", default=[], metavar="R,G,B",
                         help="kappa of each target but the last, in order (fixed before capture)")
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute",
@@ -35,6 +38,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--rgb", action="store_true", help="emit all channels at once instead of one primary at a time")
     parser.add_argument("--flood", type=float, default=None, metavar="LEVEL",
                         help="light the photograph with a projector flood of this level instead of black")
+
+
+def _order(text: str):
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"order must be an integer 1..8 or 'auto', got {text!r}") from None
 
 
 def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
@@ -74,14 +86,14 @@ def run(args) -> int:
             rig, session, targets, args.order,
             fixed_kappa=args.fixed_kappa,
             settings=CaptureSettings(per_channel=not args.rgb),
-            adaptive=None if args.adaptive == "brute" else Adaptive(args.adaptive, args.threshold),
+            adaptive=Adaptive(args.adaptive, args.threshold) if args.adaptive != "brute" or args.order == "auto" else None,
             photograph_pattern=flood,
             frames=args.frames,
             progress=ProgressBar(),
         )
     print(
         f"captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots) "
-        f"for {', '.join(n for n, _ in targets)} at order {args.order}",
+        f"for {', '.join(n for n, _ in targets)} at order {len(result.acquisition.observations)}",
         file=sys.stderr,
     )
     for name, prepared in result.targets:

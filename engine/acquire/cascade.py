@@ -90,12 +90,13 @@ class _Plan:
         self.predictors = [Predictor(p.mask) for p in prepared]
         self.log: list[dict] = []
         self.clamped = 0
+        self.track_predictions = False  # validate predictions even when never using them (auto order)
 
     def respond(self, target: int, wanted: np.ndarray, path: str, seq: _Sequence) -> np.ndarray:
         """The scene's response to emitting ``wanted`` on ``target`` (base light removed)."""
         predictor = self.predictors[target]
         policy = Policy(self.adaptive.policy)
-        guess = predictor.predict(wanted) if policy is not Policy.BRUTE else None
+        guess = predictor.predict(wanted) if policy is not Policy.BRUTE or self.track_predictions else None
         use_guess = guess is not None and (
             (policy is Policy.SPAN and guess.bound < self.adaptive.threshold) or (policy is Policy.LINEAR and seq.trusted)
         )
@@ -113,16 +114,25 @@ class _Plan:
         predictor.add(wanted, image)
         return image
 
-    def observations(self, level: int, target: int, lighting, path: str) -> np.ndarray:
-        """The K observations of ``target`` under ``lighting``, targets < level recolored."""
+    def observations(self, level: int, target: int, lighting, path: str, *, auto: bool = False) -> np.ndarray:
+        """The K observations of ``target`` under ``lighting``, targets < level recolored.
+
+        With ``auto`` (one target, Sec. 5's last paragraph) captures continue until the linear
+        prediction of the newest capture from the earlier ones is within the threshold, up to
+        MAX_ORDER observations; ``self.order`` is then the order reached.
+        """
         seq = _Sequence()
         obs = [self.recolored(level, lighting, f"{path}.0" if path else "photograph")]
-        for s in range(1, self.order):
+        for s in range(1, MAX_ORDER if auto else self.order):
             diff = self.settings.differences and s >= 2
             wanted = obs[s - 1] - obs[s - 2] if diff else obs[s - 1]
             sub = f"{path}.{s}" if path else f"r{s}"
             light = self.recolored(level, (target, wanted, seq), sub)
             obs.append(light + obs[s - 1] if diff else light)
+            if auto and self.log[-1].get("prediction_error", np.inf) < self.adaptive.threshold:
+                break
+        if auto:
+            self.order = len(obs)
         return np.stack(obs).astype(np.float32)
 
     def recolored(self, level: int, lighting, path: str) -> np.ndarray:
@@ -159,8 +169,10 @@ def acquire_cascade(
     calibration : Calibration
     targets : sequence of (name, (H, W) bool)
         In cascade order; the last one's κ stays free.
-    order : int
-        K, the decomposition order of every target.
+    order : int or "auto"
+        K, the decomposition order of every target. ``"auto"`` (one target only) captures until
+        the linear prediction (Eq. 10–11) of the newest capture is within the adaptive
+        threshold — the paper's suggestion for choosing the order — up to 8.
     fixed_kappa : sequence of float or (3,)
         κ of every target but the last, fixed before capture (Sec. 4).
     settings : CaptureSettings
@@ -185,7 +197,10 @@ def acquire_cascade(
     Cancelled
         Stopped on request; a rerun with the same session resumes.
     """
-    k = check_order(order)
+    auto = order == "auto"
+    if auto and len(targets) != 1:
+        raise InputError(f'order="auto" chooses the order of a single target; got {len(targets)} targets')
+    k = MAX_ORDER if auto else check_order(order)
     if k > MAX_ORDER:
         raise InputError(f"order must be at most {MAX_ORDER}, got {k}")
     targets = [(str(n), np.asarray(m)) for n, m in targets]
@@ -208,6 +223,8 @@ def acquire_cascade(
     identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
     adaptive = adaptive or Adaptive(Policy.BRUTE)
+    if auto and Policy(adaptive.policy) is not Policy.BRUTE:
+        raise InputError('order="auto" captures every observation; give adaptive=None or a brute policy with a threshold')
     t_count = len(targets)
     d_cost = 0 if prepared is not None else t_count * pattern_budget(True)
     recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + (k**t_count - 1) * settings.captures_per_step()
@@ -221,7 +238,8 @@ def acquire_cascade(
         ]
     plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)
     last = t_count - 1
-    obs = plan.observations(last, last, None, "")
+    plan.track_predictions = auto
+    obs = plan.observations(last, last, None, "", auto=auto)
     captured = [e for e in plan.log if e["source"] == "captured"]
     predicted = [e for e in plan.log if e["source"] == "predicted"]
     acq_log = [{"index": 0, "source": "photograph", "captures": [f"{prefix}-photograph"]}] + [

@@ -113,3 +113,20 @@ def test_bad_cascades_are_refused():
         acquire_cascade(Recorder(rig), cal, [], 3)
     with pytest.raises(InputError, match="non-negative"):
         acquire_cascade(Recorder(rig), cal, [("a", t0), ("b", t1)], 3, fixed_kappa=[-1.0])
+
+
+def test_automatic_order_stops_when_the_linear_prediction_is_good_enough():
+    from engine.acquire import Adaptive
+
+    rig = PatchRig(seed=1)
+    cal = stand_in_calibration(rig)
+    loose = acquire_cascade(Recorder(rig), cal, [("t", rig.target)], "auto", adaptive=Adaptive("brute", 0.05),
+                            prepared=[exact_prepared(rig)])
+    tight = acquire_cascade(Recorder(PatchRig(seed=1)), cal, [("t", rig.target)], "auto",
+                            adaptive=Adaptive("brute", 1e-4), prepared=[exact_prepared(rig)])
+    k_loose, k_tight = len(loose.acquisition.observations), len(tight.acquisition.observations)
+    assert 3 <= k_loose < k_tight <= 8
+    errors = [e["prediction_error"] for e in loose.log if "prediction_error" in e]
+    assert errors[-1] < 0.05 and all(e >= 0.05 for e in errors[:-1])
+    with pytest.raises(InputError, match="single target"):
+        acquire_cascade(Recorder(rig), cal, [("a", rig.targets[0]), ("b", rig.targets[0])], "auto", fixed_kappa=[1.0])
