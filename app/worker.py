@@ -261,8 +261,11 @@ class Job(QObject):
             self.paused.emit(False)
 
     def pause(self) -> None:
-        """Hold the job at its next ``should_stop()`` until :meth:`resume` or :meth:`cancel`."""
-        if self._running and self._run_gate.is_set():
+        """Hold the job at its next ``should_stop()`` until :meth:`resume` or :meth:`cancel`.
+
+        A cancelled job is not paused: it must reach its next ``should_stop()`` and end.
+        """
+        if self._running and self._run_gate.is_set() and not self._stop.is_set():
             self._run_gate.clear()
             self.paused.emit(True)
 

@@ -164,3 +164,20 @@ def test_threaded_preview_delivers_the_latest_frame(qtbot, acquired_doc):
     expected = recolor_preview(prepare_preview(doc.decomposition, (24, 32)), [4.0, 1.0, 1.0])
     np.testing.assert_array_equal(preview.frame.pixels, to_rgb32(expected))
     preview.close()
+
+
+def test_pause_after_cancel_does_not_hold_the_job(qtbot):
+    entered = threading.Event()
+
+    def fn(progress=None, should_stop=None):
+        entered.set()
+        while True:
+            checkpoint(should_stop, "the loop")
+
+    job = Job(fn)
+    job.start()
+    assert entered.wait(5)
+    with qtbot.waitSignal(job.cancelled, timeout=5000):
+        job.cancel()
+        job.pause()  # e.g. a Pause click racing the Cancel click
+    assert not job.is_paused and job.join(5)
