@@ -19,7 +19,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from engine.decompose import decompose
-from engine.figurate import outside_matrix, transport_matrix
+from engine.figurate import transport_matrix
 from engine.solve import ConeSolver, cone_basis
 
 
