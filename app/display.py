@@ -24,6 +24,16 @@ from engine.imageio import srgb_encode
 _LUT = np.round(srgb_encode(np.arange(65536, dtype=np.float64) / 65535.0) * 255.0).astype(np.uint8)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _pack_row(idx, lut, dst, w):  # pragma: no cover - compiled
+    """One row of 0xFFRRGGBB words from 16-bit sRGB table indices (R, G, B interleaved)."""
+    for j in range(w):
+        r = np.uint32(lut[idx[3 * j]])
+        g = np.uint32(lut[idx[3 * j + 1]])
+        b = np.uint32(lut[idx[3 * j + 2]])
+        dst[j] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
+
+
 @numba.njit(cache=True, nogil=True)
 def _pack_srgb(image, scale, lut, out):  # pragma: no cover - compiled
     h, w = out.shape
@@ -38,12 +48,7 @@ def _pack_srgb(image, scale, lut, out):  # pragma: no cover - compiled
             v = min(max(src[x] * scale, lo), hi) + half
             t = np.int32(v)
             idx[x] = t - ((t & 1) & np.int32(np.float32(t) == v))
-        dst = out[i]
-        for j in range(w):
-            r = np.uint32(lut[idx[3 * j]])
-            g = np.uint32(lut[idx[3 * j + 1]])
-            b = np.uint32(lut[idx[3 * j + 2]])
-            dst[j] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
+        _pack_row(idx, lut, out[i], w)
 
 
 def to_rgb32(image: np.ndarray, *, exposure: float = 0.0, out: np.ndarray | None = None) -> np.ndarray:
@@ -108,12 +113,7 @@ def _recolor_rows(comps, unreached, weights, scale, lut, out, r0, r1):  # pragma
             v = min(max((acc[x] + unr[x]) * scale, lo), hi) + half
             t = np.int32(v)
             idx[x] = t - ((t & 1) & np.int32(np.float32(t) == v))
-        dst = out[i]
-        for j in range(w):
-            r = np.uint32(lut[idx[3 * j]])
-            g = np.uint32(lut[idx[3 * j + 1]])
-            b = np.uint32(lut[idx[3 * j + 2]])
-            dst[j] = np.uint32(0xFF000000) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
+        _pack_row(idx, lut, out[i], w)
 
 
 _POOL: ThreadPoolExecutor | None = None

@@ -139,3 +139,11 @@ def dialogs(monkeypatch):
     monkeypatch.setattr(QMessageBox, "question", staticmethod(question))
     monkeypatch.setattr(MainWindow, "ask_unsaved", unsaved)
     return rec
+
+
+@pytest.fixture(scope="session")
+def virtual_cache(tmp_path_factory):
+    """One virtual-rig set-up cache for every app test that opens a rig."""
+    path = tmp_path_factory.getbasetemp() / "virtual-cache"
+    path.mkdir(exist_ok=True)
+    return path

@@ -25,14 +25,6 @@ RES = 24
 TIMEOUT_MS = 30_000
 
 
-@pytest.fixture(scope="module")
-def virtual_cache(tmp_path_factory):
-    """One set-up cache for the whole run (both app rig test files use the same folder)."""
-    path = tmp_path_factory.getbasetemp() / "virtual-cache"
-    path.mkdir(exist_ok=True)
-    return path
-
-
 def _calibrated(tmp_path_factory, virtual_cache, scene: str, projector: str):
     rig = devices.open_rig(f"virtual:{scene}", ideal=True, resolution=(RES, RES), projector=projector,
                            cache_dir=str(virtual_cache))

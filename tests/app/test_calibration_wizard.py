@@ -27,14 +27,6 @@ RES = 24
 TIMEOUT_MS = 30_000
 
 
-@pytest.fixture(scope="module")
-def virtual_cache(tmp_path_factory):
-    """One set-up cache for the whole run (both app rig test files use the same folder)."""
-    path = tmp_path_factory.getbasetemp() / "virtual-cache"
-    path.mkdir(exist_ok=True)
-    return path
-
-
 @pytest.fixture
 def make_wizard(qtbot, tmp_path, virtual_cache):
     """Factory: a wizard on virtual:cornell, ideal, RES×RES, session folder in tmp_path."""
