@@ -48,7 +48,8 @@ class CascadeResult:
     images : int
         Observation images captured (the paper's count; a per-channel image is 3 camera shots).
     predicted : int
-        Observation images predicted instead of captured.
+        Observation images predicted instead of captured (a predicted recolored observation at
+        cascade level ℓ stands for the K^ℓ images its decomposition would have taken).
     captures : int
         Camera shots taken for observations (D measurement excluded).
     """
@@ -87,25 +88,39 @@ class _Plan:
             )
             for p in prepared
         ]
-        self.predictors = [Predictor(p.mask) for p in prepared]
+        # (level, emission target) -> light emitted on the target -> the scene's response with
+        # targets < level recolored: level 0 raw captures, level >= 1 recolored observations
+        self.predictors = {}
         self.log: list[dict] = []
         self.clamped = 0
         self.track_predictions = False  # validate predictions even when never using them (auto order)
 
-    def respond(self, target: int, wanted: np.ndarray, path: str, seq: _Sequence) -> np.ndarray:
-        """The scene's response to emitting ``wanted`` on ``target`` (base light removed)."""
-        predictor = self.predictors[target]
+    def respond(self, level: int, target: int, wanted: np.ndarray, path: str, seq: _Sequence) -> np.ndarray:
+        """The response to emitting ``wanted`` on ``target``, targets < ``level`` recolored.
+
+        Level 0 is a capture (base light removed). Level ≥ 1 is a recolored observation: a
+        decomposition of target ``level - 1`` under that emission, K^level captures in all —
+        unless the prediction policy accepts a linear prediction from earlier emissions on the
+        same target at the same level (Sec. 5's recolored prediction), which skips them all.
+        """
+        predictor = self.predictors.setdefault((level, target), Predictor(self.prepared[target].mask))
         policy = Policy(self.adaptive.policy)
         guess = predictor.predict(wanted) if policy is not Policy.BRUTE or self.track_predictions else None
         use_guess = guess is not None and (
             (policy is Policy.SPAN and guess.bound < self.adaptive.threshold) or (policy is Policy.LINEAR and seq.trusted)
         )
+        saves = self.order**level  # images a prediction at this level replaces
         if use_guess:
-            self.log.append({"path": path, "target": target, "source": "predicted", "captures": [], "bound": guess.bound})
+            self.log.append({"path": path, "target": target, "level": level, "source": "predicted",
+                             "captures": [], "bound": guess.bound, "images": saves})
             return guess.image
-        image, names, clamped = reemit(self.recorder, self.emitters[target], wanted, self.base, name=f"{self.prefix}-{path}")
-        self.clamped += clamped
-        entry = {"path": path, "target": target, "source": "captured", "captures": names}
+        if level == 0:
+            image, names, clamped = reemit(self.recorder, self.emitters[target], wanted, self.base, name=f"{self.prefix}-{path}")
+            self.clamped += clamped
+            entry = {"path": path, "target": target, "level": 0, "source": "captured", "captures": names}
+        else:
+            image = self._recolor_lower(level, (target, wanted, seq), path)
+            entry = {"path": path, "target": target, "level": level, "source": "computed", "captures": []}
         if guess is not None:
             entry["prediction_error"] = relative_error(guess.image, image)
             if policy is Policy.LINEAR and entry["prediction_error"] < self.adaptive.threshold:
@@ -137,11 +152,15 @@ class _Plan:
 
     def recolored(self, level: int, lighting, path: str) -> np.ndarray:
         """The scene under ``lighting`` (None: the photograph's) with targets < level recolored."""
-        if level == 0:
-            if lighting is None:
-                return self.photograph
+        if lighting is not None:
             target, wanted, seq = lighting
-            return self.respond(target, wanted, path, seq)
+            return self.respond(level, target, wanted, path, seq)
+        if level == 0:
+            return self.photograph
+        return self._recolor_lower(level, None, path)
+
+    def _recolor_lower(self, level: int, lighting, path: str) -> np.ndarray:
+        """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ."""
         t = level - 1
         obs = self.observations(t, t, lighting, path)
         d = decompose(obs, self.prepared[t].mask)
@@ -241,9 +260,9 @@ def acquire_cascade(
     plan.track_predictions = auto
     obs = plan.observations(last, last, None, "", auto=auto)
     captured = [e for e in plan.log if e["source"] == "captured"]
-    predicted = [e for e in plan.log if e["source"] == "predicted"]
+    predicted = sum(e["images"] for e in plan.log if e["source"] == "predicted")
     acq_log = [{"index": 0, "source": "photograph", "captures": [f"{prefix}-photograph"]}] + [
-        {"index": i + 1, **e} for i, e in enumerate(plan.log)
+        {"index": i + 1, **e} for i, e in enumerate(plan.log) if e["source"] != "computed"
     ]
     acquisition = Acquisition(obs, prepared[last], base, plan.clamped, acq_log)
     return CascadeResult(
@@ -251,7 +270,7 @@ def acquire_cascade(
         targets=list(zip(names, prepared)),
         fixed_kappa=[kap.tolist() for kap in kappas],
         images=1 + len(captured),
-        predicted=len(predicted),
+        predicted=predicted,
         captures=1 + sum(len(e["captures"]) for e in captured),
         log=acq_log,
     )

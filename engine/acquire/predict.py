@@ -7,6 +7,10 @@ combination of their captures, ``I ≈ Σ w_i I_i`` (Eq. 11). A :class:`Predicto
 what makes predictions frequent there — and fits the weights per channel (each channel is
 emitted and transported on its own).
 
+Predictions are made at every level of a cascade: at level 0 of a raw capture, at level ℓ ≥ 1
+of a *recolored* observation (the scene's response with targets < ℓ recolored, Sec. 5's
+recolored prediction), which replaces the K^ℓ captures of its decomposition.
+
 Two policies decide when a prediction replaces a capture:
 
 ``linear`` (the paper's): within a sequence, capture ``I_r`` and compare it with its

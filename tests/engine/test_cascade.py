@@ -130,3 +130,15 @@ def test_automatic_order_stops_when_the_linear_prediction_is_good_enough():
     assert errors[-1] < 0.05 and all(e >= 0.05 for e in errors[:-1])
     with pytest.raises(InputError, match="single target"):
         acquire_cascade(Recorder(rig), cal, [("a", rig.targets[0]), ("b", rig.targets[0])], "auto", fixed_kappa=[1.0])
+
+
+def test_recolored_observations_are_predicted_and_skip_their_captures():
+    rig = PatchRig(seed=1, targets=3)
+    result = _run(rig, 3, 4, Adaptive("linear", 0.01))
+    levels = {e["level"] for e in result.log if e["source"] == "predicted"}
+    assert levels & {1, 2}, levels  # whole recolored sub-decompositions were predicted
+    # a prediction at level l stands for the 4**l images its decomposition would have taken
+    assert result.images + result.predicted == 4**3
+    pairs = [(rig.targets[0], KAPPAS[0]), (rig.targets[1], KAPPAS[1]), (rig.targets[2], np.array([2.0, 2.0, 4.0]))]
+    out = recolor(decompose(result.acquisition.observations, rig.targets[2]), (2.0, 2.0, 4.0))
+    assert _error(out, rig.truth(None, pairs=pairs)) < 1e-3
