@@ -320,16 +320,15 @@ class OpenCVCamera:
         """
         if not self.is_device:
             raise DeviceError("a file's exposure cannot be changed; calibrate a response from a bracketed set with devices._linearize.calibrate_response")
+        if self.dtype != np.uint8:
+            raise DeviceError("Debevec calibration needs 8-bit frames; this camera delivers 16-bit")
         before = self._exposure
         images = []
         try:
             for t in exposures:
                 self.exposure = t
                 stack = [self.capture_codes().astype(np.float64) for _ in range(self.average)]
-                codes = np.rint(np.mean(stack, axis=0))
-                if self.dtype != np.uint8:
-                    raise DeviceError("Debevec calibration needs 8-bit frames; this camera delivers 16-bit")
-                images.append(codes.astype(np.uint8))
+                images.append(np.rint(np.mean(stack, axis=0)).astype(np.uint8))
         finally:
             self.exposure = before
         self.response = calibrate_response(images, exposures, samples=samples, smoothness=smoothness)
@@ -395,5 +394,5 @@ def probe() -> list[Availability]:
     out = [Availability(f"opencv:{i}", not problem, f"video device {i}{note}") for i in _video_devices()]
     if not out:
         out.append(Availability("opencv:0", False, "no camera attached (no /dev/video* device)"))
-    out.append(Availability("opencv:FILE", True, "a video file or image sequence such as opencv:frames/f_%04d.png" + note))
+    out.append(Availability("opencv:FILE", not problem, "a video file or image sequence such as opencv:frames/f_%04d.png" + note))
     return out
