@@ -14,6 +14,10 @@ from typing import Any, Callable
 from engine.errors import DeviceError, InputError
 
 
+class DeviceTimeout(DeviceError):
+    """A device call did not return within its deadline (the call may still be running)."""
+
+
 class Watchdog:
     """Runs device calls with a deadline and remembers a call that never came back.
 
@@ -74,7 +78,7 @@ class Watchdog:
         worker.start()
         if not done.wait(timeout):
             self._hung, self._hung_what = worker, what
-            raise DeviceError(
+            raise DeviceTimeout(
                 f"the {self.device} did not finish {what} within {timeout:g} s; "
                 "check the cable and that the device is switched on and not asleep"
             )

@@ -19,17 +19,18 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from pathlib import PurePosixPath
 
 import numpy as np
 
-from devices._common import Watchdog, assemble_rig, call_with_timeout, check_positive
-from devices._linearize import RAW_EXTENSIONS, decode_raw
+from devices._common import DeviceTimeout, Watchdog, assemble_rig, call_with_timeout, check_positive
+from devices._linearize import RAW_EXTENSIONS, decode_raw, merge_exposures
 from devices.base import Frame
 from devices.registry import Availability
 from engine.errors import DeviceError, InputError
 
-__all__ = ["GPhoto2Camera", "list_cameras", "open_rig", "parse_shutter", "probe"]
+__all__ = ["GPhoto2Camera", "list_cameras", "open_camera", "open_rig", "parse_shutter", "probe"]
 
 #: libgphoto2 error codes -> what to tell the user
 ERROR_WORDS = {
@@ -41,7 +42,13 @@ ERROR_WORDS = {
     -110: "the camera is busy (still writing, focusing or showing a menu); wait and try again",
     -10: "the camera did not answer in time; check the cable and that it is not asleep",
     -7: "input/output error talking to the camera; check the USB cable and port, then reconnect",
+    -60: "could not lock the camera's USB device: another program holds it; close that program",
+    -115: "the camera has no space left (card or internal buffer full); delete images on the camera, "
+    "or use capture_target='Internal RAM'",
 }
+
+#: errors after which the session is closed and re-opened on the next capture (exit, init)
+_RECONNECT = {-1, -7, -10, -52, -53, -60, -105, -110}
 
 # config names differ between drivers; the first one the camera has is used
 _NAMES = {
@@ -73,7 +80,9 @@ def device_error(exc: BaseException, what: str) -> DeviceError:
     """
     code = getattr(exc, "code", None)
     words = ERROR_WORDS.get(code, f"libgphoto2 error {code}: {exc}")
-    return DeviceError(f"{what} failed: {words}")
+    err = DeviceError(f"{what} failed: {words}")
+    err.gphoto2_code = code
+    return err
 
 
 def parse_shutter(text: str) -> float | None:
@@ -138,13 +147,26 @@ class GPhoto2Camera:
         Seconds any single libgphoto2 call may take (capture includes the exposure itself).
     delete : bool
         Delete each shot off the camera after download (best effort).
+    release_after : float or None
+        Seconds without a capture after which the camera session is released (``exit``); the
+        next capture reconnects and re-applies every setting. Some bodies hang on the next
+        connection when a session is left open. ``None`` keeps it open until :meth:`close`.
+    hdr_brackets : int
+        When a shot has clipped pixels, take up to this many shorter exposures (each about
+        ``hdr_step`` times shorter, snapped to the camera's shutter speeds) and merge them into
+        one linear frame (:func:`devices._linearize.merge_exposures`). 0 (default) leaves
+        bracketing to the acquisition Recorder (``brackets=``); use one or the other.
+    hdr_step : float
+        Exposure ratio between bracketed shots.
     gp : module, optional
         The ``gphoto2`` module (tests inject a scripted stand-in).
 
     Attributes
     ----------
     last_raw : bytes or None
-        The original RAW file of the last capture, unchanged.
+        The original RAW file of the last capture, unchanged (the first shot of a bracket).
+    last_raws : list of (str, bytes)
+        Every RAW file of the last capture (name, bytes), bracket included.
     settings : dict
         The config values in use (shutter speed text, ISO, aperture, format, target).
     warnings : list of str
@@ -164,6 +186,9 @@ class GPhoto2Camera:
         resolution=None,
         timeout: float = 30.0,
         delete: bool = True,
+        release_after: float | None = 30.0,
+        hdr_brackets: int = 0,
+        hdr_step: float = 4.0,
         gp=None,
     ):
         self._gp = _gphoto2() if gp is None else gp
@@ -173,12 +198,25 @@ class GPhoto2Camera:
         self.warnings: list[str] = []
         self.settings: dict[str, str] = {}
         self.last_raw: bytes | None = None
+        self.last_raws: list[tuple[str, bytes]] = []
+        self.release_after = check_positive("release_after", release_after, allow_none=True)
+        if isinstance(hdr_brackets, bool) or not isinstance(hdr_brackets, int) or hdr_brackets < 0:
+            raise InputError(f"hdr_brackets must be an integer >= 0, got {hdr_brackets!r}")
+        self.hdr_brackets = hdr_brackets
+        self.hdr_step = check_positive("hdr_step", hdr_step)
+        if self.hdr_step <= 1:
+            raise InputError(f"hdr_step must be > 1 (each bracketed shot shorter), got {hdr_step!r}")
         self.closed = False
+        self._session_open = False
+        self._idle_timer: threading.Timer | None = None
+        self._last_use = 0.0
         self._lock = threading.Lock()
         self._names: dict[str, str] = {}
         self.name = camera or ""
         self._dog = Watchdog(f"camera {camera}" if camera else "camera")
+        self._cam = None
         self._cam = self._open(camera)
+        self._session_open = True
         try:
             if capture_target is not None:
                 self._set_optional("capture_target", capture_target)
@@ -201,6 +239,7 @@ class GPhoto2Camera:
         except BaseException:
             self.close()
             raise
+        self._schedule_release()
 
     # -- library calls with deadlines and plain-word errors -----------------------------
     def _call(self, fn, *args, what: str, timeout: float | None = None):
@@ -303,10 +342,17 @@ class GPhoto2Camera:
     @exposure.setter
     def exposure(self, seconds: float) -> None:
         seconds = check_positive("exposure", seconds)
+        shortest, longest = self._shutters[0], self._shutters[-1]
+        if not shortest[0] / math.sqrt(2) <= seconds <= longest[0] * math.sqrt(2):
+            raise InputError(
+                f"exposure {seconds:g} s is outside the camera's shutter speeds "
+                f"({shortest[1]} .. {longest[1]} s); valid choices: {', '.join(c for _, c in self._shutters)}"
+            )
         target = math.log(seconds)
         value, text = min(self._shutters, key=lambda sc: abs(math.log(sc[0]) - target))
         if self.settings.get("exposure") != text:
             with self._lock:
+                self._ensure_session()
                 self._write("exposure", self._config("exposure"), text)
         self._exposure = value
 
@@ -315,26 +361,65 @@ class GPhoto2Camera:
         """Linear gain, ISO / base ISO (set it with the ``iso`` option)."""
         return self._gain
 
-    # -- capturing ------------------------------------------------------------------------
-    def capture(self) -> Frame:
-        """Trigger, download the RAW file to memory, delete it off the camera, decode linearly.
+    # -- the session ----------------------------------------------------------------------
+    def _ensure_session(self) -> None:
+        """(Re)connect after an idle release or an error, and re-apply every setting."""
+        if self._dog.recovered:  # an abandoned call came back: the session state is unknown
+            self._dog.recovered = False
+            self._drop_session()
+        if self._session_open:
+            return
+        self._call(self._cam.init, what="reconnecting to the camera")
+        self._session_open = True
+        for key, value in list(self.settings.items()):  # some bodies forget settings per session
+            self._write(key, self._config(key), value)
 
-        Returns
-        -------
-        Frame
-            ``image`` = linear RAW (black removed, white level = 1) / (exposure * gain);
-            ``saturated`` where a photosite clipped; metadata ``raw_name`` and the settings.
+    def _drop_session(self) -> None:
+        """Best-effort ``exit`` so the next capture starts a fresh session."""
+        try:
+            self._dog.call(self._cam.exit, timeout=min(self.timeout, 10.0), what="releasing the camera")
+        except self._gp.GPhoto2Error:
+            pass
+        except DeviceError:  # a call is still stuck in the library: cannot release now
+            return
+        self._session_open = False
 
-        Raises
-        ------
-        DeviceError
-            The camera failed or timed out (in plain words), delivered a non-RAW file, or an
-            image of another size.
-        """
-        gp = self._gp
+    def _schedule_release(self) -> None:
+        self._last_use = time.monotonic()
+        if self.release_after is None:
+            return
+        if self._idle_timer is not None:
+            self._idle_timer.cancel()
+        self._idle_timer = threading.Timer(self.release_after, self._release_if_idle)
+        self._idle_timer.daemon = True
+        self._idle_timer.start()
+
+    def _release_if_idle(self) -> None:
+        if not self._lock.acquire(blocking=False):
+            return  # a capture is running; it schedules the next release itself
+        try:
+            if not self.closed and self._session_open and time.monotonic() - self._last_use >= self.release_after * 0.99:
+                self._drop_session()
+        finally:
+            self._lock.release()
+
+    def release(self) -> None:
+        """Release the camera session now; the next capture reconnects (settings kept)."""
         with self._lock:
-            if self.closed:
-                raise DeviceError("the gphoto2 camera is closed")
+            if self._session_open and not self.closed:
+                self._drop_session()
+
+    @property
+    def connected(self) -> bool:
+        """Whether a libgphoto2 session is open (False after an idle release or an error)."""
+        return self._session_open
+
+    # -- capturing ------------------------------------------------------------------------
+    def _shoot(self) -> tuple[str, bytes]:
+        """Trigger, download and delete one shot (caller holds the lock)."""
+        gp = self._gp
+        try:
+            self._ensure_session()
             path = self._call(self._cam.capture, gp.GP_CAPTURE_IMAGE, what="capturing", timeout=self.timeout + self._exposure)
             folder, name = str(path.folder), str(path.name)
             try:
@@ -346,9 +431,15 @@ class GPhoto2Camera:
                         self._call(self._cam.file_delete, folder, name, what=f"deleting {name} from the camera")
                     except DeviceError as exc:  # some bodies refuse: harmless
                         self.warnings.append(str(exc))
+        except DeviceError as exc:
+            if getattr(exc, "gphoto2_code", None) in _RECONNECT or isinstance(exc, DeviceTimeout):
+                self._drop_session()  # unplugged, timed out, claimed: start afresh next time
+            raise
         if PurePosixPath(name).suffix.lower() not in RAW_EXTENSIONS:
             raise DeviceError(f"the camera delivered {name!r}, not a RAW file; set image_format='RAW' (RAW only, not RAW+JPEG)")
-        self.last_raw = data
+        return name, data
+
+    def _decode(self, name: str, data: bytes):
         try:
             raw = decode_raw(data)
         except DeviceError as exc:
@@ -358,7 +449,69 @@ class GPhoto2Camera:
             self.resolution = (h, w)
         elif (h, w) != tuple(self.resolution):
             raise DeviceError(f"{name} is {w}x{h} pixels; the camera's images were {self.resolution[1]}x{self.resolution[0]}")
-        scale = np.float32(1.0 / (self._exposure * self._gain))
+        return raw
+
+    def _bracket(self, raw, shots: list[tuple[str, bytes]]):
+        """Shorter shots until nothing is clipped; returns (image, saturated, exposures) merged."""
+        images = [raw.image / np.float32(self._exposure * self._gain)]
+        masks, times = [raw.saturated], [self._exposure]
+        start_text = self.settings["exposure"]
+        try:
+            for _ in range(self.hdr_brackets):
+                clipped = np.logical_and.reduce(masks)
+                if not clipped.any():
+                    break
+                shorter = [sc for sc in self._shutters if sc[0] < times[-1] * 0.99]
+                if not shorter:
+                    break
+                target = math.log(times[-1] / self.hdr_step)
+                seconds, text = min(shorter, key=lambda sc: abs(math.log(sc[0]) - target))
+                self._write("exposure", self._config("exposure"), text)
+                name, data = self._shoot()
+                shots.append((name, data))
+                short = self._decode(name, data)
+                images.append(short.image / np.float32(seconds * self._gain))
+                masks.append(short.saturated)
+                times.append(seconds)
+        finally:
+            if self.settings.get("exposure") != start_text:
+                self._write("exposure", self._config("exposure"), start_text)
+        image, saturated = merge_exposures(images, masks, times)
+        return image, saturated, times
+
+    def capture(self) -> Frame:
+        """Trigger, download the RAW file to memory, delete it off the camera, decode linearly.
+
+        Returns
+        -------
+        Frame
+            ``image`` = linear RAW (black removed, white level = 1) / (exposure * gain);
+            ``saturated`` where a photosite clipped; metadata ``raw_name`` and the settings.
+            With ``hdr_brackets`` and clipped pixels, the exposure-weighted merge of the bracket
+            (metadata ``bracket``: the exposures, ``raw_names``).
+
+        Raises
+        ------
+        DeviceError
+            The camera failed or timed out (in plain words; the session is re-opened on the
+            next capture), delivered a non-RAW file, or an image of another size.
+        """
+        with self._lock:
+            if self.closed:
+                raise DeviceError("the gphoto2 camera is closed")
+            if self._idle_timer is not None:
+                self._idle_timer.cancel()
+            try:
+                name, data = self._shoot()
+                shots = [(name, data)]
+                self.last_raw, self.last_raws = data, shots
+                raw = self._decode(name, data)
+                if self.hdr_brackets and raw.saturated.any():
+                    image, saturated, times = self._bracket(raw, shots)
+                else:
+                    image, saturated, times = raw.image / np.float32(self._exposure * self._gain), raw.saturated, [self._exposure]
+            finally:
+                self._schedule_release()
         meta = {
             "backend": "gphoto2",
             "camera": self.name,
@@ -366,22 +519,32 @@ class GPhoto2Camera:
             "white_level": raw.white_level,
             "settings": dict(self.settings),
         }
-        return Frame(image=raw.image * scale, exposure=self._exposure, gain=self._gain, black_level=raw.black_level, saturated=raw.saturated, metadata=meta)
+        if len(times) > 1:
+            meta["bracket"] = [float(t) for t in times]
+            meta["raw_names"] = [n for n, _ in shots]
+        return Frame(image=image.astype(np.float32), exposure=self._exposure, gain=self._gain, black_level=raw.black_level, saturated=saturated, metadata=meta)
 
     def close(self) -> None:
         """Release the camera (``exit``). Idempotent; errors while releasing are ignored."""
         if self.closed:
             return
         self.closed = True
-        cam = getattr(self, "_cam", None)
-        if cam is not None:
+        if self._idle_timer is not None:
+            self._idle_timer.cancel()
+        if getattr(self, "_cam", None) is not None and self._session_open:
             try:
-                self._call(cam.exit, what="releasing the camera", timeout=min(self.timeout, 10.0))
+                self._call(self._cam.exit, what="releasing the camera", timeout=min(self.timeout, 10.0))
             except DeviceError:
                 pass
+            self._session_open = False
 
     def __repr__(self) -> str:
         return f"GPhoto2Camera({self.name!r}, exposure={self._exposure:g}, resolution={self.resolution})"
+
+
+def open_camera(camera: str | None = None, **options) -> GPhoto2Camera:
+    """Open a :class:`GPhoto2Camera` (port or model; ``None`` for the first camera found)."""
+    return GPhoto2Camera(camera, **options)
 
 
 def open_rig(arg: str = "", *, projector=None, settle: float | None = None, projector_timeout: float | None = None, **options):
@@ -399,7 +562,7 @@ def open_rig(arg: str = "", *, projector=None, settle: float | None = None, proj
         :class:`GPhoto2Camera` options (``exposure``, ``iso``, ``aperture``, ...).
     """
     popts = {k: v for k, v in (("settle", settle), ("timeout", projector_timeout)) if v is not None}
-    camera = GPhoto2Camera(arg or None, **options)
+    camera = open_camera(arg or None, **options)
     return assemble_rig(f"gphoto2:{arg}" if arg else "gphoto2", camera, projector, **popts)
 
 
@@ -411,4 +574,8 @@ def probe(*, gp=None) -> list[Availability]:
         return [Availability("gphoto2:", False, str(exc))]
     if not cameras:
         return [Availability("gphoto2:", False, "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
-    return [Availability(f"gphoto2:{port}", True, model) for model, port in cameras]
+    from devices.qtscreen import second_screen_problem
+
+    problem = second_screen_problem()
+    note = f"; projector: {problem} (pass projector='qtscreen:0')" if problem else ""
+    return [Availability(f"gphoto2:{port}", not problem, f"{model}{note}") for model, port in cameras]

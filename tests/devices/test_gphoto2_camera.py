@@ -141,11 +141,13 @@ def test_exposure_snaps_to_nearest_shutter_speed_and_reports_it():
         ]
     )
     cam = GPhoto2Camera(exposure=1 / 8, iso="200", gp=fake_gphoto2(script))
-    cam.exposure = 1 / 8 / 1e3  # below the shortest: the shortest the camera has
+    cam.exposure = 1 / 300  # nearest offered: 1/250
     assert cam.exposure == 1 / 250
     cam.exposure = 1 / 250  # no change, no exchange
-    cam.exposure = 100.0
+    cam.exposure = 40.0
     assert cam.exposure == 30.0
+    with pytest.raises(InputError, match=r"exposure 0.001 s is outside the camera's shutter speeds \(1/250 .. 30 s\); valid choices: 1/250, 1/60"):
+        cam.exposure = 1e-3  # more than half a stop beyond the shortest: refused, nothing sent
     with pytest.raises(InputError, match="exposure"):
         cam.exposure = -1
     cam.close()
@@ -177,6 +179,8 @@ def test_camera_without_capture_target_warns():
         (-110, "camera is busy"),
         (-10, "did not answer in time"),
         (-7, "input/output error"),
+        (-60, "could not lock"),
+        (-115, "no space left"),
         (-99, "libgphoto2 error -99"),
     ],
 )
@@ -188,7 +192,7 @@ def test_error_codes_become_plain_words(code, words):
 
 
 def test_capture_error_still_deletes_nothing_and_maps_busy(make_dng):
-    script = Script(opening() + [("capture", (0,), GPhoto2Error(-110)), ("exit", (), None)])
+    script = Script(opening() + [("capture", (0,), GPhoto2Error(-110)), ("exit", (), None)])  # exit: session dropped
     cam = GPhoto2Camera(exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
     with pytest.raises(DeviceError, match="capturing failed: the camera is busy"):
         cam.capture()
@@ -261,4 +265,114 @@ def test_open_rig_with_given_projector(make_dng):
         rig = open_rig("", projector=virtual.projector, exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
         assert rig.name == "gphoto2"
         rig.camera.close()
+    script.finished()
+
+
+def reapply(shutter="1/8"):
+    """A reconnection: init, then every setting written again (some bodies forget them per session)."""
+    return [
+        ("init", (), None),
+        ("get_single_config", ("capturetarget",), Widget("Memory card", ["Internal RAM", "Memory card"])),
+        ("set_single_config", ("capturetarget", "Internal RAM"), None),
+        ("get_single_config", ("imageformat",), Widget("RAW", ["Large Fine JPEG", "RAW"])),
+        ("set_single_config", ("imageformat", "RAW"), None),
+        ("get_single_config", ("iso",), Widget("200", ISOS)),
+        ("set_single_config", ("iso", "200"), None),
+        ("get_single_config", ("shutterspeed",), Widget(shutter, SHUTTERS)),
+        ("set_single_config", ("shutterspeed", "1/8"), None),
+    ]
+
+
+def test_unplugged_mid_capture_then_reconnects_and_reapplies_settings(make_dng):
+    raw = make_dng(np.full((H, W), 1064, np.uint16))
+    script = Script(
+        opening()
+        + [("capture", (0,), GPhoto2Error(-7)), ("exit", (), GPhoto2Error(-7))]  # unplugged: exit fails too
+        + reapply()
+        + shot("capt0001.dng", raw)
+        + [("exit", (), None)]
+    )
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, gp=fake_gphoto2(script))
+    with pytest.raises(DeviceError, match="capturing failed: input/output error .* USB cable"):
+        cam.capture()
+    assert not cam.connected
+    frame = cam.capture()  # plugged back in: a fresh session with the same settings
+    assert cam.connected and frame.metadata["raw_name"] == "capt0001.dng"
+    cam.close()
+    script.finished()
+
+
+def test_full_card_is_a_plain_error_and_the_shot_is_not_downloaded():
+    script = Script(opening() + [("capture", (0,), GPhoto2Error(-115)), ("exit", (), None)])
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, gp=fake_gphoto2(script))
+    with pytest.raises(DeviceError, match="no space left .* delete images"):
+        cam.capture()
+    cam.close()
+    script.finished()
+
+
+def test_session_released_when_idle_and_reopened_by_the_next_capture(make_dng):
+    raw = make_dng(np.full((H, W), 1064, np.uint16))
+    released = threading.Event()
+    script = Script(
+        opening()
+        + shot("capt0000.dng", raw)
+        + [("exit", (), released.set)]  # the idle timer releases the session
+        + reapply()
+        + shot("capt0001.dng", raw)
+        + [("exit", (), None)]  # release() by hand
+        + reapply()
+        + shot("capt0002.dng", raw)
+        + [("exit", (), None)]  # close()
+    )
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, gp=fake_gphoto2(script))
+    cam.release_after = 0.05  # armed after each capture
+    cam.capture()
+    assert released.wait(5) and not cam.connected
+    cam.release_after = None
+    cam.capture()
+    assert cam.connected
+    cam.release()
+    assert not cam.connected
+    assert cam.capture().metadata["raw_name"] == "capt0002.dng"
+    cam.close()
+    script.finished()
+
+
+def test_hdr_bracket_merges_a_shorter_shot_where_the_first_clipped(make_dng):
+    black, white = 64, 4000
+    span = white - black
+    # radiance (fraction of full scale per second at gain 1): left half 4, right half 16
+    radiance = np.where(np.arange(W) < W // 2, 4.0, 16.0)[None, :].repeat(H, 0)
+
+    def dng(t):
+        frac = radiance * t * 2.0  # gain 2 (ISO 200 / 100)
+        return make_dng(np.where(frac >= 1, white, np.rint(black + frac * span)).astype(np.uint16))
+
+    long_raw, short_raw = dng(1 / 8), dng(1 / 60)  # right half clips at 1/8 s (16 * 0.25 = 4 > 1)
+    script = Script(
+        opening()
+        + shot("capt0000.dng", long_raw)
+        + [("get_single_config", ("shutterspeed",), Widget("1/8", SHUTTERS)), ("set_single_config", ("shutterspeed", "1/60"), None)]
+        + shot("capt0001.dng", short_raw)
+        + [("get_single_config", ("shutterspeed",), Widget("1/60", SHUTTERS)), ("set_single_config", ("shutterspeed", "1/8"), None)]
+        + [("exit", (), None)]
+    )
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, hdr_brackets=2, gp=fake_gphoto2(script))
+    frame = cam.capture()
+    assert frame.metadata["bracket"] == [0.125, 1 / 60] and frame.metadata["raw_names"] == ["capt0000.dng", "capt0001.dng"]
+    assert not frame.saturated.any() and frame.exposure == 0.125
+    np.testing.assert_allclose(frame.image[4:-4, 4 : W // 2 - 4], 4.0, rtol=2e-3)
+    np.testing.assert_allclose(frame.image[4:-4, W // 2 + 4 : -4], 16.0, rtol=2e-3)
+    assert [n for n, _ in cam.last_raws] == ["capt0000.dng", "capt0001.dng"] and cam.last_raw == long_raw
+    assert cam.settings["exposure"] == "1/8"  # restored after the bracket
+    cam.close()
+    script.finished()
+
+
+def test_probe_lists_cameras_and_says_when_the_projector_screen_is_missing():
+    script = Script([("autodetect", (), [("Canon EOS 80D", "usb:001,005")])])
+    (entry,) = probe(gp=fake_gphoto2(script))
+    assert entry.name == "gphoto2:usb:001,005" and entry.reason.startswith("Canon EOS 80D")
+    assert not entry.ok and "no second screen" in entry.reason  # the offscreen test platform has one screen
     script.finished()
