@@ -281,7 +281,9 @@ class GPhoto2Camera:
         raise DeviceError(f"the camera has no {key.replace('_', ' ')} setting (tried {', '.join(_NAMES[key])})")
 
     def _choices(self, widget) -> list[str]:
-        return [str(c) for c in widget.get_choices()]
+        if hasattr(widget, "get_choices"):  # python-gphoto2 >= 2.0
+            return [str(c) for c in widget.get_choices()]
+        return [str(widget.get_choice(i)) for i in range(widget.count_choices())]
 
     def _write(self, key: str, widget, value: str) -> None:
         widget.set_value(value)

@@ -29,7 +29,7 @@ from devices.base import Frame
 from devices.registry import Availability
 from engine.errors import DeviceError, InputError
 
-__all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_rig", "probe"]
+__all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_camera", "open_rig", "probe"]
 
 #: non-RAW files the folder may receive (JPEG is display-encoded and lossy: not accepted)
 IMAGE_EXTENSIONS = frozenset({".tif", ".tiff", ".exr", ".png"})
@@ -290,6 +290,11 @@ class HotFolderCamera:
         return f"HotFolderCamera({str(self.folder)!r}, resolution={self.resolution})"
 
 
+def open_camera(folder, **options) -> HotFolderCamera:
+    """Open a :class:`HotFolderCamera` on ``folder`` (to pair with any projector in a Rig)."""
+    return HotFolderCamera(folder, **options)
+
+
 def open_rig(arg: str = "", *, projector=None, settle: float | None = None, projector_timeout: float | None = None, **options):
     """Open ``"hotfolder:FOLDER"``: a hot-folder camera plus a projector window.
 
@@ -314,10 +319,14 @@ def open_rig(arg: str = "", *, projector=None, settle: float | None = None, proj
     if not arg:
         raise InputError("hotfolder needs a folder: open_rig('hotfolder:/path/to/folder')")
     popts = {k: v for k, v in (("settle", settle), ("timeout", projector_timeout)) if v is not None}
-    camera = HotFolderCamera(arg, **options)
+    camera = open_camera(arg, **options)
     return assemble_rig(f"hotfolder:{arg}", camera, projector, **popts)
 
 
 def probe() -> list[Availability]:
-    """The hot folder is always usable: it needs only a folder the tethering software writes to."""
-    return [Availability("hotfolder:FOLDER", True, "captures saved into FOLDER by the camera's tethering software")]
+    """The hot folder needs only a folder the tethering software writes to (and a projector screen)."""
+    from devices.qtscreen import second_screen_problem
+
+    problem = second_screen_problem()
+    note = f"; projector: {problem} (pass projector='qtscreen:0')" if problem else ""
+    return [Availability("hotfolder:FOLDER", not problem, f"captures saved into FOLDER by the camera's tethering software{note}")]

@@ -157,3 +157,15 @@ def test_open_rig_pairs_a_given_projector(tmp_path):
         assert rig.name == f"hotfolder:{tmp_path}" and rig.camera.resolution == (H, W)
     with pytest.raises(InputError, match="needs a folder"):
         open_rig("")
+
+
+def test_open_camera_and_probe_name_the_missing_projector_screen(tmp_path):
+    from devices.hotfolder import open_camera, probe
+
+    cam = open_camera(tmp_path, resolution=(H, W), exposure=0.5)
+    assert isinstance(cam, HotFolderCamera) and cam.resolution == (H, W) and cam.exposure == 0.5
+    (entry,) = probe()
+    assert entry.name == "hotfolder:FOLDER"
+    assert not entry.ok and "no second screen" in entry.reason  # one offscreen test screen
+    with pytest.raises(DeviceError, match="no second screen for the projector"):
+        open_rig(str(tmp_path), resolution=(H, W))  # default projector: the second screen

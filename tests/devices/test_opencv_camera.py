@@ -159,3 +159,72 @@ def test_open_rig_with_a_given_projector(tmp_path):
         assert rig.projector is proj and rig.camera.resolution == (H, W)
         assert rig.name.startswith("opencv:")
         rig.camera.close()
+
+
+class FakeV4L2:
+    """A scripted stand-in for ``cv2.VideoCapture`` on a V4L2 webcam: gamma-1.6 frames of a known
+    radiance at the exposure last set (in 100 microsecond units); refuses auto exposure."""
+
+    radiance = np.geomspace(1.0, 1000.0, H * W).reshape(H, W)[..., None] * np.array([1.0, 0.8, 0.6])
+
+    def __init__(self, index, *args):
+        self.units = 100.0  # 10 ms
+        self.grabs = 0
+        self.sets: list[tuple[int, float, bool]] = []
+        self.released = False
+
+    def isOpened(self):  # noqa: N802 (OpenCV's name)
+        return True
+
+    def getBackendName(self):  # noqa: N802
+        return "V4L2"
+
+    def set(self, prop, value):
+        ok = prop != cv2.CAP_PROP_AUTO_EXPOSURE and not (prop == cv2.CAP_PROP_EXPOSURE and value > 1e5)
+        self.sets.append((prop, value, ok))
+        if ok and prop == cv2.CAP_PROP_EXPOSURE:
+            self.units = value
+        return ok
+
+    def get(self, prop):
+        return self.units if prop == cv2.CAP_PROP_EXPOSURE else 0.0
+
+    def grab(self):
+        self.grabs += 1
+        return True
+
+    def read(self):
+        lin = np.clip(self.radiance * self.units * 1e-4, 0.0, 1.0)
+        rgb = np.rint(lin ** (1 / 1.6) * 255).astype(np.uint8)
+        return True, np.ascontiguousarray(rgb[:, :, ::-1])
+
+    def release(self):
+        self.released = True
+
+
+def test_webcam_controls_refusals_recorded_and_response_measured(monkeypatch):
+    monkeypatch.setattr(cv2, "VideoCapture", FakeV4L2)
+    cam = open_camera(0, exposure=0.002)
+    try:
+        dev = cam._cap
+        assert cam.controls["auto_exposure"] == "refused" and cam.controls["auto_wb"] == 0
+        assert cam.controls["exposure"] == pytest.approx(20.0)  # 2 ms in 100 us units
+        assert any("refused to switch auto exposure off" in w for w in cam.warnings)
+        assert cam.exposure == 0.002
+        with pytest.raises(DeviceError, match="refused exposure 20 s"):
+            cam.exposure = 20.0
+        assert cam.exposure == 0.002  # unchanged after a refusal
+        grabs = dev.grabs
+        cam.capture()  # first capture after opening drops the driver's queued frames
+        assert dev.grabs == grabs + cam.discard == grabs + 4
+        curve = cam.calibrate_response([1e-4, 4e-4, 1.6e-3, 6.4e-3, 2.56e-2, 0.1])
+        assert curve.name == "debevec" and cam.response is curve and cam.exposure == 0.002
+        frame = cam.capture()
+        assert frame.metadata["response"] == "debevec" and frame.metadata["controls"]["auto_exposure"] == "refused"
+        ok = ~frame.saturated & (frame.image[..., 1] > frame.image[..., 1].max() * 0.05)
+        # linear after calibration: radiance ratios match the scene's (Debevec fixes scale only)
+        ratio = frame.image[..., 1][ok] / FakeV4L2.radiance[..., 1][ok]
+        assert ratio.std() / ratio.mean() < 0.03  # the assumed sRGB curve is off by ~20 % here
+    finally:
+        cam.close()
+    assert dev.released

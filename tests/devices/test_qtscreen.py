@@ -20,9 +20,11 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture
 def projector():
-    sleeps: list[float] = []
-    proj = qtscreen.open_projector(0, settle=0.05, timeout=5.0, sleep=sleeps.append)
-    proj.sleeps = sleeps
+    events: list = []  # ("settle", seconds, serial painted when the settle wait began)
+    holder = {}
+    proj = qtscreen.open_projector(0, settle=0.05, timeout=5.0, sleep=lambda s: events.append(("settle", s, holder["p"].window.painted)))
+    holder["p"] = proj
+    proj.sleeps = events
     yield proj
     proj.close()
     qtscreen.QApplication.processEvents()
@@ -41,7 +43,7 @@ def test_show_paints_exactly_the_quantised_pattern(projector):
     expected = np.rint(pattern * 255).astype(np.uint8)
     np.testing.assert_array_equal(projector.grab(), expected)
     np.testing.assert_array_equal(projector.last_shown, expected)
-    assert projector.sleeps == [0.05]  # the settle wait, once per frame
+    assert projector.sleeps == [("settle", 0.05, 1)]  # one settle wait per frame, after it was painted
     win = projector.window
     assert win.isFullScreen() and win.windowFlags() & qtscreen.Qt.WindowType.FramelessWindowHint
 
@@ -50,11 +52,13 @@ def test_show_from_a_worker_waits_until_painted(projector):
     pattern = _pattern(projector.resolution, seed=1)
     calls = []
     projector.add_shown_callback(lambda: calls.append(projector.window.painted))
+    projector.add_shown_callback(lambda: projector.sleeps.append(("shown", projector.window.painted)))
     result: dict = {}
 
     def work():
         try:
             projector.show(pattern)
+            result["events_at_return"] = list(projector.sleeps)
             result["painted"] = projector.window.painted
             result["serial"] = projector.window.serial
         except BaseException as exc:
@@ -72,6 +76,8 @@ def test_show_from_a_worker_waits_until_painted(projector):
     assert "error" not in result, result
     # show() returned only after the window had painted this very frame
     assert result["painted"] == result["serial"] == 1 and calls == [1]
+    # painted, cameras told, then the settle wait, and only then did show() return
+    assert result["events_at_return"] == [("shown", 1), ("settle", 0.05, 1)]
     np.testing.assert_array_equal(projector.grab(), np.rint(pattern * 255).astype(np.uint8))
 
 
