@@ -135,6 +135,7 @@ class ConeSolver:
             test, x_map = self._kkt_matrices(list(s))
             self._tests.append(test)
             self._maps.append(x_map)
+        self._kernel_arrays = self._stack_for_kernel()
 
     def _kkt_matrices(self, free: list[int]) -> tuple[np.ndarray, np.ndarray]:
         g = self._g
@@ -182,6 +183,9 @@ class ConeSolver:
 
     def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(tests (S, n, m), maps (S, n_x, n))`` for :func:`engine._kernels.kkt_columns`."""
+        return self._kernel_arrays
+
+    def _stack_for_kernel(self) -> tuple[np.ndarray, np.ndarray]:
         n = self._g.shape[1]
         maps = np.zeros((len(self._sets), self.a.shape[1], n))
         for i, free in enumerate(self._sets):

@@ -8,7 +8,7 @@ from pathlib import Path
 from app.commands._args import kappa
 from engine.errors import InputError, SessionError
 from engine.denoise import denoise_components
-from engine.imageio import write_image
+from engine.imageio import to_display, write_image
 from engine.recolor import recolor
 from engine.session import Session
 from engine.workflow import load_decomposition
@@ -64,13 +64,7 @@ def write_edit(path: Path, image, *, plan: dict, kappa_value, half: bool = False
     edit = {"targets": plan.get("targets"), "fixed_kappa": plan.get("fixed_kappa"), "kappa": list(map(float, kappa_value)), "order": plan.get("order")}
     suffix = path.suffix.lower()
     dtype = "half" if (half and suffix == ".exr") else ("uint8" if suffix == ".png" else "float")
-    write_image(path, image if dtype != "uint8" else _display(image), dtype=dtype, metadata={"albedit.edit": edit})
-
-
-def _display(image):
-    from engine.imageio import to_display
-
-    return to_display(image)
+    write_image(path, image if dtype != "uint8" else to_display(image), dtype=dtype, metadata={"albedit.edit": edit})
 
 
 def run(args) -> int:

@@ -78,8 +78,6 @@ def prepare_target(
     shifts: int = 2,
     floor: float = 0.02,
     consistency: float = 0.7,
-    smooth: float = 0.0,
-    photograph: np.ndarray | None = None,
 ) -> PreparedTarget:
     """Measure D on a painted target and drop the pixels the projector cannot re-emit.
 
@@ -107,13 +105,6 @@ def prepare_target(
         to the correspondence) is below this fraction of its correspondence-free
         ``max − min`` has a wrong correspondence (lit and unlit captures got mixed) and is
         unreachable. Noise biases ``max − min`` up by about 2σ, hence the margin.
-    smooth : float
-        Gaussian sigma (camera pixels) of the denoising of D; 0 keeps the raw estimate.
-        ``D / photograph`` is the ratio of projector to scene irradiance — albedo and texture
-        cancel — and is smooth on a surface, so it is averaged within the target and
-        multiplied back by the photograph.
-    photograph : (H, W, 3) float32, optional
-        Needed when ``smooth`` > 0.
 
     Returns
     -------
@@ -172,8 +163,6 @@ def prepare_target(
     usable = painted_valid & consistent & (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
     if not usable.any():
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
-    if smooth > 0:
-        direct = _smooth_ratio(direct, photograph, usable, smooth)
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
     return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix)
@@ -205,23 +194,6 @@ def _conflicts(corr: Correspondence, target: np.ndarray, *, distance: float = 0.
     out[vt, ut] = np.hypot(du, dv) > distance
     out[vt, ut] &= owner_u[corr.y[vt, ut], corr.x[vt, ut]] > -1e8
     return out
-
-
-def _smooth_ratio(direct: np.ndarray, photograph: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
-    """Average ``direct / photograph`` over the mask (normalised convolution) and multiply back."""
-    import cv2
-
-    if photograph is None:
-        raise InputError("prepare_target: smooth > 0 needs the photograph")
-    photo = np.asarray(photograph, np.float64)
-    ok = mask[:, :, None] & (photo > 0)
-    ratio = np.where(ok, direct / np.where(ok, photo, 1), 0)
-    w = ok.astype(np.float64)
-    blur = lambda a: cv2.GaussianBlur(a, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
-    num = np.stack([blur(ratio[..., c] * w[..., c]) for c in range(3)], -1)
-    den = np.stack([blur(w[..., c]) for c in range(3)], -1)
-    smoothed = np.where(den > 1e-6, num / np.maximum(den, 1e-12), ratio) * photo
-    return np.where(ok, smoothed, direct).astype(np.float32)
 
 
 def _neighbourhood_states(patterns, corr: Correspondence, mask: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

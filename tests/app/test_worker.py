@@ -102,7 +102,8 @@ def test_job_failure_carries_the_message(qtbot):
     assert str(blocker.args[0]) == "the engine's message" and "ValueError" in job.traceback
 
 
-def test_job_pause_and_cancel(qtbot):
+def _looping_job():
+    """A job that loops until stopped, and the event set once it runs."""
     entered = threading.Event()
 
     def fn(progress=None, should_stop=None):
@@ -110,7 +111,11 @@ def test_job_pause_and_cancel(qtbot):
         while True:
             checkpoint(should_stop, "the loop")
 
-    job = Job(fn)
+    return Job(fn), entered
+
+
+def test_job_pause_and_cancel(qtbot):
+    job, entered = _looping_job()
     paused = []
     job.paused.connect(paused.append)
     job.start()
@@ -167,14 +172,7 @@ def test_threaded_preview_delivers_the_latest_frame(qtbot, acquired_doc):
 
 
 def test_pause_after_cancel_does_not_hold_the_job(qtbot):
-    entered = threading.Event()
-
-    def fn(progress=None, should_stop=None):
-        entered.set()
-        while True:
-            checkpoint(should_stop, "the loop")
-
-    job = Job(fn)
+    job, entered = _looping_job()
     job.start()
     assert entered.wait(5)
     with qtbot.waitSignal(job.cancelled, timeout=5000):
