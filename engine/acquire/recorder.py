@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from engine.errors import SessionError
+from engine.errors import DeviceError, SessionError
 from engine.progress import Progress, ShouldStop, checkpoint, report
 from engine.session import Session, pattern_hash
 
@@ -148,22 +148,28 @@ class Recorder:
         image = np.array(frame.image, np.float32)
         start = camera.exposure
         used = []
+        refused = None
         try:
             for _ in range(self.brackets):
-                camera.exposure = camera.exposure / self.bracket_step
-                short = self._shot()
+                try:
+                    camera.exposure = camera.exposure / self.bracket_step
+                except (AttributeError, ValueError, TypeError, DeviceError) as exc:
+                    refused = str(exc)  # this camera cannot change exposure: keep what we have
+                    break
+                short = self._shot()  # a failing capture is a device fault: it propagates
                 fix = saturated & ~np.asarray(short.saturated, bool)
                 image[fix] = short.image[fix]
                 saturated = saturated & np.asarray(short.saturated, bool)
                 used.append(float(camera.exposure))
                 if not saturated.any():
                     break
-        except (AttributeError, ValueError, TypeError):  # exposure not settable to that value
-            pass
         finally:
-            camera.exposure = start
+            if camera.exposure != start:
+                camera.exposure = start
         meta = dict(getattr(frame, "metadata", {}) or {})
         meta["brackets"] = used
+        if refused is not None:
+            meta["bracketing_refused"] = refused
         return _Frame(image, frame.exposure, getattr(frame, "gain", 1.0), getattr(frame, "black_level", 0.0), saturated, meta)
 
     def black(self) -> np.ndarray:

@@ -91,3 +91,52 @@ def test_bad_order_and_foreign_calibration():
     other = Calibration(**{**_calibration(rig).__dict__, "rig_name": "virtual:cornell"})
     with pytest.raises(InputError, match="made for rig 'virtual:cornell'"):
         acquire_single(Recorder(rig), other, rig.target, 3)
+
+
+class _ClippingRig(PatchRig):
+    """A stand-in whose frames clip above 1.0 and whose exposure may be fixed or broken."""
+
+    def __init__(self, *, exposure_error=None, fail_short=False):
+        self._exposure_error, self._fail_short = None, fail_short
+        self._exp = 1.0
+        super().__init__()
+        self._exposure_error = exposure_error
+
+    @property
+    def exposure(self):
+        return self._exp
+
+    @exposure.setter
+    def exposure(self, value):
+        if self._exposure_error is not None and value != self._exp:
+            raise self._exposure_error
+        self._exp = value
+
+    def capture(self):
+        if self._fail_short and self._exp < 1.0:
+            from engine.errors import DeviceError
+
+            raise DeviceError("camera unplugged")
+        frame = super().capture()
+        frame.saturated = (frame.image * self._exp > 1.0).any(axis=-1)
+        return frame
+
+
+def test_a_camera_that_cannot_change_exposure_keeps_its_clipped_frame():
+    from engine.errors import DeviceError
+
+    rig = _ClippingRig(exposure_error=DeviceError("no known exposure unit"))
+    rig.shown = np.full((H, W, 3), 1.0, np.float32)
+    assert rig.capture().saturated.any()
+    rec = Recorder(rig)
+    image = rec.capture("clipped", rig.shown)
+    assert image.shape == (H, W, 3) and rec.last_saturated.any()
+
+
+def test_a_capture_failing_inside_a_bracket_is_a_device_fault():
+    from engine.errors import DeviceError
+
+    rig = _ClippingRig(fail_short=True)
+    with pytest.raises(DeviceError, match="unplugged"):
+        Recorder(rig).capture("clipped", np.full((H, W, 3), 1.0, np.float32))
+    assert rig.exposure == 1.0  # restored
