@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 import types
 
 import numpy as np
@@ -328,7 +329,12 @@ def test_session_released_when_idle_and_reopened_by_the_next_capture(make_dng):
     cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, gp=fake_gphoto2(script))
     cam.release_after = 0.05  # armed after each capture
     cam.capture()
-    assert released.wait(5) and not cam.connected
+    assert released.wait(5)
+    # the timer thread marks the session closed just after ``exit`` returns: wait for it
+    deadline = time.monotonic() + 5
+    while cam.connected and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert not cam.connected
     cam.release_after = None
     cam.capture()
     assert cam.connected
