@@ -3,6 +3,9 @@
 Qt mouse events become plain :class:`app.painting.MouseEvent` in camera-pixel coordinates and
 go to the :class:`~app.painting.Painter`; the canvas itself never edits masks. Pan with the
 middle button or with Space held; zoom with the wheel (around the cursor), Fit and 100 %.
+Every move of the view is announced (:attr:`Canvas.viewport_changed`) so the preview can
+sharpen the visible region; a :class:`~app.render.Detail` is drawn over the frame of the same
+request and dropped when a frame of another request arrives.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ from PySide6.QtWidgets import QWidget
 
 from app.model import Document
 from app.painting import EventType, MouseEvent, Painter, Tool
-from app.render import Frame, View
+from app.render import Detail, Frame, View
 
 _BACKGROUND = QColor(38, 38, 40)
 _OVERLAY_ALPHA = 0  # other targets: outline only, so the recoloring stays visible
@@ -27,6 +30,10 @@ def _qimage(words: np.ndarray) -> QImage:
     return QImage(words.data, w, h, 4 * w, QImage.Format.Format_RGB32)
 
 
+def _qimages(first: np.ndarray, second: np.ndarray | None) -> tuple[QImage, QImage | None]:
+    return _qimage(first), (_qimage(second) if second is not None else None)
+
+
 class Canvas(QWidget):
     """Image view with painting.
 
@@ -36,10 +43,14 @@ class Canvas(QWidget):
         ``(x, y)`` camera pixel under the cursor, or None when it leaves the image.
     zoom_changed(float)
         Screen pixels per camera pixel.
+    viewport_changed(tuple, float)
+        The camera pixels ``(y0, y1, x0, x1)`` on screen and the zoom, after every zoom, pan
+        or resize.
     """
 
     cursor_moved = Signal(object)
     zoom_changed = Signal(float)
+    viewport_changed = Signal(tuple, float)
 
     MIN_ZOOM, MAX_ZOOM = 1.0 / 64.0, 64.0
 
@@ -53,6 +64,8 @@ class Canvas(QWidget):
         self.painter = painter
         self.frame: Frame | None = None
         self._images: tuple[QImage, QImage | None] | None = None
+        self.detail: Detail | None = None
+        self._detail_images: tuple[QImage, QImage | None] | None = None
         self.zoom = 1.0
         self.offset = QPointF(0.0, 0.0)  # widget position of camera pixel (0, 0)
         self._extent: tuple[int, int] = document.shape
@@ -80,12 +93,39 @@ class Canvas(QWidget):
         """Show ``frame`` (keeps a reference: the QImages wrap its arrays)."""
         extent_changed = tuple(frame.extent) != self._extent
         self.frame = frame
-        second = _qimage(frame.second) if frame.second is not None else None
-        self._images = (_qimage(frame.pixels), second)
+        self._images = _qimages(frame.pixels, frame.second)
+        if self.detail is not None and not self._matches(self.detail):
+            self.detail = self._detail_images = None
         if extent_changed:
             self._extent = tuple(frame.extent)
             self.fit()
         self.update()
+
+    def set_detail(self, detail: Detail) -> None:
+        """Draw ``detail`` over the frame while the frame on screen is of the same request."""
+        if not self._matches(detail):
+            return
+        self.detail = detail
+        self._detail_images = _qimages(detail.pixels, detail.second)
+        self.update()
+
+    def _matches(self, detail: Detail) -> bool:
+        f = self.frame
+        return f is not None and f.generation == detail.generation and f.request == detail.request
+
+    def visible_region(self) -> tuple[int, int, int, int]:
+        """Camera pixels ``(y0, y1, x0, x1)`` inside the widget (clipped to the image)."""
+        h, w = self._extent
+        top_left = self.to_image(QPointF(0.0, 0.0))
+        bottom_right = self.to_image(QPointF(float(self.width()), float(self.height())))
+        y0, x0 = max(int(np.floor(top_left.y())), 0), max(int(np.floor(top_left.x())), 0)
+        y1, x1 = min(int(np.ceil(bottom_right.y())), h), min(int(np.ceil(bottom_right.x())), w)
+        return y0, max(y1, y0), x0, max(x1, x0)
+
+    def _view_moved(self) -> None:
+        self.update()
+        if self._paints_camera_pixels():
+            self.viewport_changed.emit(self.visible_region(), self.zoom)
 
     def fit(self) -> None:
         """Zoom so the whole image fits, centred."""
@@ -111,7 +151,7 @@ class Canvas(QWidget):
     def _set_zoom(self, zoom: float, offset: QPointF) -> None:
         changed = zoom != self.zoom
         self.zoom, self.offset = zoom, offset
-        self.update()
+        self._view_moved()
         if changed:
             self.zoom_changed.emit(zoom)
 
@@ -176,19 +216,11 @@ class Canvas(QWidget):
         p.fillRect(self.rect(), _BACKGROUND)
         rect = self.image_rect()
         if self._images is not None:
-            first, second = self._images
-            frame_px = rect.width() / max(first.width(), 1)
-            p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, frame_px < 2.0)
-            if second is not None:
-                cut = rect.left() + rect.width() * self.split
-                p.save()
-                p.setClipRect(QRectF(rect.left(), rect.top(), cut - rect.left(), rect.height()))
-                p.drawImage(rect, first)
-                p.setClipRect(QRectF(cut, rect.top(), rect.right() - cut, rect.height()))
-                p.drawImage(rect, second)
-                p.restore()
-            else:
-                p.drawImage(rect, first)
+            self._draw_pair(p, rect, self._images, rect)
+        if self._detail_images is not None:
+            y0, y1, x0, x1 = self.detail.region
+            place = QRectF(self.to_widget(QPointF(x0, y0)), self.to_widget(QPointF(x1, y1)))
+            self._draw_pair(p, place, self._detail_images, rect)
         if self.show_overlays and self._paints_camera_pixels():
             p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, self.zoom < 1.0)
             p.drawImage(rect, self._overlay_image)
@@ -204,6 +236,22 @@ class Canvas(QWidget):
         self.paint_count += 1
         if self.frame is not None:
             self.painted_request = self.frame.request_id
+
+    def _draw_pair(self, p: QPainter, place: QRectF, images, rect: QRectF) -> None:
+        """Draw ``images`` (first, optional second) stretched over ``place``; with a second, the
+        split divider at ``self.split`` of the image ``rect`` cuts between them."""
+        first, second = images
+        p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, place.width() / max(first.width(), 1) < 2.0)
+        if second is None:
+            p.drawImage(place, first)
+            return
+        cut = min(max(rect.left() + rect.width() * self.split, place.left()), place.right())
+        p.save()
+        p.setClipRect(QRectF(place.left(), place.top(), cut - place.left(), place.height()))
+        p.drawImage(place, first)
+        p.setClipRect(QRectF(cut, place.top(), place.right() - cut, place.height()))
+        p.drawImage(place, second)
+        p.restore()
 
     def _draw_divider(self, p: QPainter, rect: QRectF) -> None:
         x = rect.left() + rect.width() * self.split
@@ -337,7 +385,7 @@ class Canvas(QWidget):
             start, offset = self._pan_from
             self.offset = QPointF(offset.x() + pos.x() - start.x(), offset.y() + pos.y() - start.y())
             self._fitted = False
-            self.update()
+            self._view_moved()
             return
         if self._dragging_split:
             rect = self.image_rect()
@@ -403,4 +451,6 @@ class Canvas(QWidget):
     def resizeEvent(self, e) -> None:  # noqa: N802
         if self._fitted:
             self.fit()
+        else:
+            self._view_moved()
         super().resizeEvent(e)

@@ -354,6 +354,8 @@ class MainWindow(QMainWindow):
         self.preview.exposure = self.exposure_spin.value()
         self.preview.view = self._checked_view()
         self.preview.frame_ready.connect(self._on_frame)
+        self.preview.detail_ready.connect(self.canvas.set_detail)
+        self.canvas.viewport_changed.connect(self.preview.set_viewport)
         self.preview.failed.connect(lambda msg: self.statusBar().showMessage(msg, 8000))
         self.canvas.cursor_moved.connect(self._on_cursor)
         self.canvas.zoom_changed.connect(lambda z: self.zoom_label.setText(f"{100 * z:.0f} %"))

@@ -6,15 +6,21 @@
 affects the picture (κ, view, exposure, masks for ground truth). Frames come back on the UI
 thread through :attr:`PreviewController.frame_ready`; results older than the frame on screen,
 or from a replaced renderer, are dropped.
+
+Zoomed in past the preview's resolution, the visible region is also rendered at full
+resolution (:meth:`~app.render.Renderer.render_detail`) on a second worker once the picture
+has been still for :attr:`PreviewController.DETAIL_DELAY_MS`, and arrives through
+:attr:`PreviewController.detail_ready`: drags stay on the fast screen-sized path, and what the
+user inspects at 100 % is the export's pixels.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, QTimer, Signal
 
 from app.model import Document
-from app.render import NEEDS_DECOMPOSITION, NEEDS_TRUTH, Frame, Renderer, Request, View
+from app.render import DETAIL_VIEWS, NEEDS_DECOMPOSITION, NEEDS_TRUTH, Detail, Frame, Renderer, Request, View
 from app.worker import LatestWorker
 
 
@@ -32,11 +38,21 @@ class PreviewController(QObject):
     Signals
     -------
     frame_ready(Frame)
+    detail_ready(Detail)
+        A full-resolution patch of the visible region for the frame of the same request.
     failed(str)
     """
 
     frame_ready = Signal(object)
+    detail_ready = Signal(object)
     failed = Signal(str)
+
+    #: Stillness before the full-resolution detail is rendered (ms).
+    DETAIL_DELAY_MS = 120
+    #: Largest detail region (camera pixels); bigger regions keep the preview alone.
+    MAX_DETAIL_PIXELS = 4_000_000
+    #: Preview pixels magnified at least this much on screen get a detail.
+    DETAIL_MAGNIFICATION = 1.25
 
     def __init__(self, document: Document, *, max_shape=(1080, 1920), synchronous: bool = False,
                  parent: QObject | None = None):
@@ -49,6 +65,14 @@ class PreviewController(QObject):
         self.worker = LatestWorker(self._render, synchronous=synchronous, parent=self)
         self.worker.done.connect(self._on_done)
         self.worker.failed.connect(self._on_failed)
+        self.detail_worker = LatestWorker(self._render_detail, synchronous=synchronous, parent=self)
+        self.detail_worker.done.connect(self._on_detail)
+        self.detail_worker.failed.connect(self._on_failed)
+        self.viewport: tuple[tuple[int, int, int, int], float] | None = None
+        self._detail_timer = QTimer(self)
+        self._detail_timer.setSingleShot(True)
+        self._detail_timer.setInterval(self.DETAIL_DELAY_MS)
+        self._detail_timer.timeout.connect(self._submit_detail)
         self.generation = 0
         self.renderer: Renderer | None = None
         self.frame: Frame | None = None
@@ -79,6 +103,22 @@ class PreviewController(QObject):
             if self.view == View.COMPONENTS:
                 self.request()
 
+    def set_viewport(self, region: tuple[int, int, int, int], zoom: float) -> None:
+        """The camera pixels ``(y0, y1, x0, x1)`` on screen and the zoom (screen px per camera px)."""
+        viewport = (tuple(int(v) for v in region), float(zoom))
+        if viewport != self.viewport:
+            self.viewport = viewport
+            self._schedule_detail()
+
+    def wants_detail(self) -> bool:
+        """Whether the current view, zoom and region call for a full-resolution detail."""
+        r = self.renderer
+        if r is None or self.viewport is None or self.view not in DETAIL_VIEWS:
+            return False
+        (y0, y1, x0, x1), zoom = self.viewport
+        area = max(min(y1, r.shape[0]) - max(y0, 0), 0) * max(min(x1, r.shape[1]) - max(x0, 0), 0)
+        return r.factor > 1 and r.factor * zoom >= self.DETAIL_MAGNIFICATION and 0 < area <= self.MAX_DETAIL_PIXELS
+
     def available(self, view: View) -> bool:
         """Whether ``view`` can be shown for this document."""
         if view in NEEDS_DECOMPOSITION and self.doc.decomposition is None:
@@ -101,6 +141,7 @@ class PreviewController(QObject):
                       self._edit() if self.view in NEEDS_TRUTH else (), self.grid)
         self.last_request = req
         self.last_id = self.worker.submit((self.generation, self.renderer, req))
+        self._schedule_detail()
         return self.last_id
 
     def readout(self, x: int, y: int):
@@ -114,15 +155,41 @@ class PreviewController(QObject):
         return r.readout(self.view, x, y, self.doc.recolor_kappa(), edit)
 
     def close(self) -> None:
+        self._detail_timer.stop()
         self.worker.close()
+        self.detail_worker.close()
 
     # ------------------------------------------------------------------ internals
     @staticmethod
     def _render(payload) -> Frame:
         generation, renderer, request = payload
         frame = renderer.render(request)
-        frame.generation = generation
+        frame.generation, frame.request = generation, request
         return frame
+
+    @staticmethod
+    def _render_detail(payload) -> Detail | None:
+        generation, renderer, request, region = payload
+        detail = renderer.render_detail(request, region)
+        if detail is not None:
+            detail.generation = generation
+        return detail
+
+    def _schedule_detail(self) -> None:
+        if not self.wants_detail():
+            self._detail_timer.stop()
+        elif self.worker.synchronous:
+            self._submit_detail()
+        else:
+            self._detail_timer.start()  # restarts: only a still picture gets a detail
+
+    def _submit_detail(self) -> None:
+        if self.wants_detail() and self.last_request is not None:
+            self.detail_worker.submit((self.generation, self.renderer, self.last_request, self.viewport[0]))
+
+    def _on_detail(self, rid: int, detail: Detail | None) -> None:
+        if detail is not None and detail.generation == self.generation and detail.request == self.last_request:
+            self.detail_ready.emit(detail)
 
     def _on_done(self, rid: int, frame: Frame) -> None:
         if frame.generation != self.generation or rid <= self._shown_id:

@@ -2,9 +2,10 @@
 
 A :class:`Renderer` holds screen-sized copies of everything a view needs (the decomposition
 packed by :func:`engine.recolor.prepare_preview`, the photograph averaged the same way) so a
-slider event costs one preview recolor plus one display conversion. Full resolution is only
-used for export (:mod:`app.files`) and for the pixel read-out (:meth:`Renderer.readout`),
-which recolors the single pixel under the cursor exactly.
+slider event costs one preview recolor plus one display conversion. Full resolution is used
+for export (:mod:`app.files`), for the pixel read-out (:meth:`Renderer.readout`), which
+recolors the single pixel under the cursor exactly, and for the :class:`Detail` of the visible
+region once the canvas is zoomed in past the preview's resolution.
 
 Renderers are immutable after :meth:`Renderer.prepare` and only read their own copies, so the
 preview worker can call :meth:`Renderer.render` on its thread while the user keeps editing.
@@ -38,6 +39,9 @@ class View(StrEnum):
 #: Views that only make sense with a decomposition / with ground truth (virtual rig).
 NEEDS_DECOMPOSITION = frozenset({View.DIFFERENCE, View.COMPONENTS, View.ERROR})
 NEEDS_TRUTH = frozenset({View.TRUTH, View.ERROR})
+#: Views that sharpen to full resolution when zoomed in (the diagnostic false-colour views
+#: keep the preview's scale and resolution).
+DETAIL_VIEWS = frozenset({View.RECOLORED, View.ORIGINAL, View.SPLIT})
 
 
 @dataclass(frozen=True)
@@ -105,7 +109,31 @@ class Frame:
     scale: ScaleBar | None = None
     tiles: list[Tile] = field(default_factory=list)
     note: str = ""
+    request: Request | None = None
     request_id: int = 0
+    generation: int = 0
+
+
+@dataclass(eq=False)
+class Detail:
+    """A full-resolution patch of a frame: the visible region when zoomed in.
+
+    Attributes
+    ----------
+    pixels : (y1 - y0, x1 - x0) uint32
+        ``0xFFRRGGBB`` words of camera pixels ``[y0:y1, x0:x1]``.
+    region : (y0, y1, x0, x1)
+        Where the patch goes, in camera pixels.
+    request : Request
+        The request the patch was rendered for: it belongs on a frame of the same request.
+    second : ndarray, optional
+        The original's patch in the split view.
+    """
+
+    pixels: np.ndarray
+    region: tuple[int, int, int, int]
+    request: Request
+    second: np.ndarray | None = None
     generation: int = 0
 
 
@@ -243,6 +271,25 @@ class Renderer:
                      scale=ScaleBar(0.0, s, MAGNITUDE_MAP, "|recolored − ground truth| (luminance)"),
                      note=f"relative error {100 * rel:.2f} % (preview resolution)")
 
+    def render_detail(self, request: Request, region: tuple[int, int, int, int]) -> Detail | None:
+        """Full-resolution pixels of ``region`` = (y0, y1, x0, x1) in ``request``'s view.
+
+        Returns None where the preview already is full resolution or the view has no detail
+        (:data:`DETAIL_VIEWS`). Recolored pixels are :func:`app.display.recolor_rgb32` of the
+        cropped decomposition, so they equal the export's pixels there.
+        """
+        view = View(request.view)
+        if self.factor == 1 or view not in DETAIL_VIEWS:
+            return None
+        y0, y1, x0, x1 = _clip_region(region, self.shape)
+        if y1 <= y0 or x1 <= x0:
+            return None
+        photo = to_rgb32(np.ascontiguousarray(self.photograph[y0:y1, x0:x1]), exposure=request.exposure)
+        if view == View.ORIGINAL or self.decomposition is None:
+            return Detail(photo, (y0, y1, x0, x1), request)
+        pixels = recolor_rgb32(self.decomposition.crop(y0, y1, x0, x1), request.kappa, exposure=request.exposure)
+        return Detail(pixels, (y0, y1, x0, x1), request, second=photo if view == View.SPLIT else None)
+
     def recolored_small(self, kappa) -> np.ndarray:
         """Linear preview of the recolored image (the photograph when nothing is acquired)."""
         if self.pack is None:
@@ -321,10 +368,13 @@ class Renderer:
 
     def pixel(self, x: int, y: int, kappa) -> np.ndarray:
         """Full-resolution recolored value at one pixel, through :func:`engine.recolor.recolor`."""
-        d = self.decomposition
-        one = type(d)(d.components[:, y : y + 1, x : x + 1], d.unreached[y : y + 1, x : x + 1],
-                      d.target[y : y + 1, x : x + 1], d.constraint, d.unreached_light, None)
-        return recolor(one, kappa)[0, 0]
+        return recolor(self.decomposition.crop(y, y + 1, x, x + 1), kappa)[0, 0]
+
+
+def _clip_region(region, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    y0, y1, x0, x1 = (int(v) for v in region)
+    h, w = shape
+    return max(y0, 0), min(y1, h), max(x0, 0), min(x1, w)
 
 
 def _sup(n: int) -> str:

@@ -78,6 +78,16 @@ class Decomposition:
         comps = self.components[: self.outside_order]
         return np.where(self.target[None, :, :, None], 0, comps).astype(self.components.dtype)
 
+    def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Decomposition":
+        """The rectangle ``[y0:y1, x0:x1]`` as a decomposition of its own (views, no copy).
+
+        Recoloring is per pixel (Eq. 3–4), so recoloring the crop equals cropping the recolor.
+        """
+        rows, cols = slice(y0, y1), slice(x0, x1)
+        residual = None if self.residual is None else self.residual[rows, cols]
+        return Decomposition(self.components[:, rows, cols], self.unreached[rows, cols], self.target[rows, cols],
+                             self.constraint, self.unreached_light, residual)
+
     @classmethod
     def from_components(cls, inside, outside, unreached, target, *, constraint: str = "none") -> "Decomposition":
         """Build a decomposition from separate inside/outside components (e.g. ground truth).

@@ -7,6 +7,7 @@ import pytest
 from PySide6.QtCore import QPoint, QPointF, Qt
 
 from app.model import Document
+from app.display import recolor_rgb32
 from app.painting import Tool
 
 from .test_painting import _capsule_reference
@@ -127,3 +128,32 @@ def test_split_divider_drags(make_window, acquired_doc, qtbot):
     assert c.split == pytest.approx(0.8, abs=0.02)
     np.testing.assert_array_equal(acquired_doc.by_name("wall").mask, mask)
     assert c.grab().width() > 0
+
+
+def test_zoomed_in_past_the_preview_the_visible_region_sharpens_to_export_pixels(make_window, acquired_doc, qtbot):
+    w = make_window(acquired_doc)
+    c, preview = w.canvas, w.preview
+    preview.max_shape = (12, 16)  # a 4× smaller preview, as a 24 MP photograph on a 1080p screen
+    preview.rebuild()
+    assert preview.renderer.factor == 4
+    c.zoom_to(32.0, QPointF(0, 0))
+    region = c.visible_region()
+    assert c.detail is not None and c.detail.region == region and region[1] - region[0] < 48
+    wall = acquired_doc.by_name("wall")
+    kappa = wall.kappa
+    full = recolor_rgb32(acquired_doc.decomposition, kappa)
+    c.show_overlays = False  # compare the picture itself, without target outlines and tints
+    image = c.grab().toImage()
+    for y, x in [(region[0] + 3, region[2] + 5), (region[1] - 2, region[3] - 3)]:
+        centre = c.to_widget(QPointF(x + 0.5, y + 0.5))
+        assert image.pixel(int(centre.x()), int(centre.y())) & 0xFFFFFF == int(full[y, x]) & 0xFFFFFF
+    # a new κ: the old detail no longer belongs on screen; the new one follows
+    old = c.detail
+    acquired_doc.set_kappa(wall.uid, (2.0, 0.5, 0.5))
+    assert c.detail is not old and c.detail.request.kappa == (2.0, 0.5, 0.5)
+    c.set_detail(old)  # a late detail of an earlier request is ignored
+    assert c.detail is not old
+    # back to fit on a large preview: nothing to sharpen
+    preview.max_shape = (1080, 1920)
+    preview.rebuild()
+    assert not preview.wants_detail()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.display import MAGNITUDE_MAP, false_colour, recolor_rgb32, rgb32_to_rgb, robust_max, to_rgb32
-from app.render import Renderer, Request, View, area_average, component_grid, preview_factor
+from app.render import DETAIL_VIEWS, Renderer, Request, View, area_average, component_grid, preview_factor
 from engine.errors import InputError
 from engine.imageio import to_display
 from engine.recolor import prepare_preview, recolor, recolor_preview
@@ -128,3 +128,32 @@ def test_preview_factor_and_grid():
     assert preview_factor((100, 100), (1080, 1920)) == 1
     assert component_grid(4, (100, 100), (100, 400)) == (1, 4)
     assert component_grid(1, (100, 100), (100, 400)) == (1, 1)
+
+
+@pytest.mark.parametrize("view", sorted(DETAIL_VIEWS))
+def test_detail_is_the_full_resolution_frame_cropped(synthetic, view):
+    d, photo = synthetic
+    renderer = Renderer(photo, d, max_shape=(12, 16)).prepare()
+    assert renderer.factor == 4
+    request = Request(view, (2.0, 0.125, 8.0), exposure=0.5)
+    detail = renderer.render_detail(request, (-5, 20, 30, 999))  # clipped to the image
+    assert detail.region == (0, 20, 30, 64) and detail.request == request
+    recolored = recolor_rgb32(d, request.kappa, exposure=0.5)[:20, 30:]
+    original = to_rgb32(photo, exposure=0.5)[:20, 30:]
+    np.testing.assert_array_equal(detail.pixels, original if view == View.ORIGINAL else recolored)
+    if view == View.SPLIT:
+        np.testing.assert_array_equal(detail.second, original)
+    else:
+        assert detail.second is None
+
+
+def test_no_detail_where_the_preview_is_full_resolution_or_the_view_is_diagnostic(synthetic):
+    d, photo = synthetic
+    assert Renderer(photo, d).prepare().render_detail(Request(View.RECOLORED), (0, 10, 0, 10)) is None
+    small = Renderer(photo, d, max_shape=(12, 16)).prepare()
+    for view in set(View) - DETAIL_VIEWS:
+        assert small.render_detail(Request(view), (0, 10, 0, 10)) is None
+    assert small.render_detail(Request(View.RECOLORED), (60, 70, 0, 10)) is None  # outside the image
+    # nothing acquired yet: the recolored view's detail is the photograph
+    bare = Renderer(photo, max_shape=(12, 16)).prepare().render_detail(Request(View.RECOLORED), (0, 10, 0, 10))
+    np.testing.assert_array_equal(bare.pixels, to_rgb32(photo)[:10, :10])

@@ -62,6 +62,17 @@ def test_preview_is_the_area_average_of_the_full_recolor():
     assert prepare_preview(d, (500, 500)).decomposition is d
 
 
+def test_recoloring_a_crop_is_cropping_the_recolor():
+    rng = np.random.default_rng(5)
+    k, h, w = 3, 40, 50
+    d = Decomposition(rng.random((k, h, w, 3), dtype=np.float32), rng.random((h, w, 3), dtype=np.float32),
+                      rng.random((h, w)) > 0.5, residual=rng.random((h, w), dtype=np.float32))
+    crop = d.crop(7, 31, 12, 13)
+    assert np.shares_memory(crop.components, d.components)  # a view: the detail preview copies nothing twice
+    np.testing.assert_array_equal(crop.residual, d.residual[7:31, 12:13])
+    np.testing.assert_array_equal(recolor(crop, (0.3, 2.0, 5.0)), recolor(d, (0.3, 2.0, 5.0))[7:31, 12:13])
+
+
 @pytest.mark.parametrize(
     "kappa, match",
     [(-1.0, "non-negative"), ((1.0, 2.0), "one value per channel"), (np.nan, "finite"), ((1, 1, -0.1), "non-negative")],
