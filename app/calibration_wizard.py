@@ -52,10 +52,11 @@ from PySide6.QtWidgets import (
 )
 
 import devices
+from devices.qtscreen import identify_pattern
 from app.rig_views import CoverageMap, LiveView, ProgressEta, ResponsePlot, finish_job, rig_lock, worker_rig
 from app.worker import Job, LatestWorker, UiCaller
 from engine.acquire import calibration_budget
-from engine.calibrate import exposure_report
+from engine.calibrate import AutoExposure, exposure_report
 from engine.errors import DeviceError, InputError, SessionError
 from engine.progress import checkpoint
 from engine.session import Session
@@ -306,6 +307,9 @@ class ProjectorPage(QWizardPage):
 class ExposurePage(QWizardPage):
     """Live view on a worker, exposure control, saturation overlay and the exposure report."""
 
+    #: Frames automatic exposure may take before it gives up.
+    AUTO_MAX_STEPS = 12
+
     def __init__(self, wizard: "CalibrationWizard"):
         super().__init__()
         self.setTitle("Camera exposure")
@@ -318,8 +322,13 @@ class ExposurePage(QWizardPage):
         longer, shorter = QPushButton("×2"), QPushButton("÷2")
         longer.clicked.connect(lambda: self.exposure.setValue(self.exposure.value() * 2))
         shorter.clicked.connect(lambda: self.exposure.setValue(self.exposure.value() / 2))
+        self.auto_button = QPushButton("Auto")
+        self.auto_button.setToolTip("Adjust the exposure under projector white until the brightest surfaces sit just "
+                                    "below clipping (a lamp in view may still clip: it is not projector light)")
+        self.auto_button.clicked.connect(self.start_auto)
         self.level = QComboBox()
-        self.level.addItems(["white (what calibration checks)", "black (ambient light only)"])
+        self.level.addItems(["white (what calibration checks)", "black (ambient light only)",
+                             "identify (grid and centre cross: check pose and focus)"])
         self.overlay = QCheckBox("show saturated pixels", checked=True)
         self.overlay.toggled.connect(self.live.set_show_saturation)
         self.report = QLabel("waiting for the camera…")
@@ -329,6 +338,7 @@ class ExposurePage(QWizardPage):
         controls.addWidget(self.exposure)
         controls.addWidget(shorter)
         controls.addWidget(longer)
+        controls.addWidget(self.auto_button)
         controls.addSpacing(12)
         controls.addWidget(QLabel("Projector"))
         controls.addWidget(self.level)
@@ -343,6 +353,10 @@ class ExposurePage(QWizardPage):
         self.worker: LatestWorker | None = None
         self.grabbed_on = ""  # name of the thread that grabbed the last frame (tests, diagnostics)
         self._shown = None  # (exposure, level) the worker last applied
+        self.auto: AutoExposure | None = None  # running automatic exposure
+        self.auto_message = ""
+        self._auto_steps = 0
+        self._auto_asked: float | None = None  # the exposure of the frame the next step waits for
 
     # -- live loop (UI thread) -------------------------------------------------------------
     def initializePage(self) -> None:  # noqa: N802 (Qt name)
@@ -384,15 +398,59 @@ class ExposurePage(QWizardPage):
         if self.worker is None or not self.worker.idle() or self.w.rig is None:
             return
         exposure = self.exposure.value() / 1000.0 if self.exposure.isEnabled() else None
-        self.worker.submit((exposure, 1.0 if self.level.currentIndex() == 0 else 0.0))
+        self.worker.submit((exposure, self._pattern()))
+
+    def _pattern(self) -> tuple[str, np.ndarray]:
+        """(key, projector image) of the chosen projector level."""
+        hp, wp = self.w.rig.projector.resolution
+        index = self.level.currentIndex()
+        if index == 2:
+            return "identify", identify_pattern((hp, wp), label=f"{self.w.rig.name}  {wp}x{hp}")
+        return ("white", "black")[index], np.full((hp, wp, 3), 1.0 if index == 0 else 0.0, np.float32)
+
+    # -- automatic exposure (UI thread: each live frame is one step) --------------------------
+    def start_auto(self) -> None:
+        """Step the exposure frame by frame under projector white until it settles."""
+        if not self.exposure.isEnabled():
+            self.report.setText(_red("This camera's exposure cannot be set from Albedit."))
+            return
+        self.level.setCurrentIndex(0)
+        self.auto = AutoExposure(percentile=99.5, max_saturated=0.005)
+        self._auto_steps = 0
+        self._auto_asked = self.exposure.value() / 1000.0
+        self.auto_button.setEnabled(False)
+        self.auto_button.setText("Auto…")
+
+    def _auto_step(self, result) -> None:
+        if result["level"] != "white" or result["asked"] != self._auto_asked:
+            return  # grabbed before the last change (the camera may round what was asked: use its value)
+        self._auto_steps += 1
+        wanted = self.auto.step(result["image"], result["saturated"], exposure=result["exposure"])
+        if wanted is None or self._auto_steps >= self.AUTO_MAX_STEPS:
+            self.auto = None
+            self.auto_button.setEnabled(True)
+            self.auto_button.setText("Auto")
+            self.auto_message = (
+                f"Auto exposure settled at {result['exposure'] * 1000:.4g} ms after {self._auto_steps} frames."
+                if wanted is None else f"Auto exposure gave up after {self._auto_steps} frames: set it by hand.")
+            return
+        self.exposure.setValue(wanted * 1000.0)
+        self._auto_asked = self.exposure.value() / 1000.0  # as the spin box rounded it
 
     def _on_frame(self, _rid: int, result) -> None:
         if result is None:  # the rig was busy
             return
         self.grabbed_on = result["thread"]
         self.live.set_frame(result["image"], result["saturated"], exposure=result["exposure"], gain=result["gain"])
+        if self.auto is not None:
+            self._auto_step(result)
         style = "" if result["ok"] else f" style='color:{_RED}'"
-        self.report.setText(f"<span{style}>{_esc(result['report'])}</span>")
+        text = f"<span{style}>{_esc(result['report'])}</span>"
+        if self.auto is not None:
+            text = f"auto exposure: frame {self._auto_steps}…<br>" + text
+        elif self.auto_message:
+            text = f"{_esc(self.auto_message)}<br>" + text
+        self.report.setText(text)
 
     def _on_grab_failed(self, _rid: int, exc) -> None:
         self.report.setText(_red(f"Camera: {_error_text(exc)}"))
@@ -405,13 +463,12 @@ class ExposurePage(QWizardPage):
         if not lock.acquire(blocking=False):
             return None
         try:
-            exposure, level = request
+            exposure, (level, pattern) = request
             cam = rig.camera
             if exposure is not None and not np.isclose(getattr(cam, "exposure", exposure), exposure, rtol=1e-6):
                 cam.exposure = exposure
             if self._shown is None or self._shown != level:
-                hp, wp = rig.projector.resolution
-                worker_rig(rig, self.w.ui).projector.show(np.full((hp, wp, 3), level, np.float32))
+                worker_rig(rig, self.w.ui).projector.show(pattern)
                 self._shown = level
             frame = cam.capture()
             report = exposure_report(frame.image, saturated=frame.saturated)
@@ -422,6 +479,8 @@ class ExposurePage(QWizardPage):
                 "gain": float(getattr(frame, "gain", 1.0)),
                 "report": report.message,
                 "ok": report.ok,
+                "level": level,
+                "asked": exposure,
                 "thread": threading.current_thread().name,
             }
         finally:

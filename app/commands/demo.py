@@ -34,6 +34,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--order", type=int, default=4, help="decomposition order K (default %(default)s)")
     parser.add_argument("--resolution", type=resolution, default=(128, 128), help="camera resolution (default 128)")
     parser.add_argument("--ideal", action="store_true", help="an ideal rig (no noise, linear projector)")
+    parser.add_argument("--projector", choices=("coaxial", "offset"), default="coaxial",
+                        help="projector pose: co-axial with the camera, or the scene's offset pose (default %(default)s)")
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute")
     parser.add_argument("--frames", type=int, default=16,
                         help="frames averaged per capture (default %(default)s: κ = 8 amplifies noise 8^i at order i)")
@@ -61,7 +63,8 @@ def run(args) -> int:
         shutil.rmtree(session_path)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
-    with devices.open_rig(f"virtual:{args.scene}", ideal=args.ideal, resolution=args.resolution, seed=0) as rig:
+    with devices.open_rig(f"virtual:{args.scene}", ideal=args.ideal, resolution=args.resolution, seed=0,
+                          projector=args.projector) as rig:
         if args.target not in rig.targets:
             raise InputError(f"scene {args.scene!r} has no target {args.target!r}; it has {sorted(rig.targets)}")
         mask = rig.targets[args.target]

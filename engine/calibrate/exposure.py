@@ -13,8 +13,9 @@ import numpy as np
 
 from engine._checks import check_mask
 from engine.calibrate._common import check_fraction, check_image, check_images, check_positive
+from engine.errors import InputError
 
-__all__ = ["ExposureReport", "black_frame", "exposure_report"]
+__all__ = ["AutoExposure", "ExposureReport", "black_frame", "exposure_report"]
 
 
 def black_frame(captures) -> np.ndarray:
@@ -179,3 +180,92 @@ def exposure_report(
         verdict, advice = "ok", ""
     message = f"{verdict}: {facts}" + (f"; {advice}" if advice else "")
     return ExposureReport(n, sat_frac, under, amb, verdict == "ok", verdict, message)
+
+
+@dataclass
+class AutoExposure:
+    """Find the exposure that puts a capture's bright end just below clipping, frame by frame.
+
+    Radiance (``Frame.image``) does not depend on the exposure, but the radiance at which the
+    camera clips does: it is ``c / exposure`` for a constant ``c`` of the camera and gain.
+    Nothing in a frame says where clipping is until something clips, so the stepper lengthens
+    the exposure by ``step_factor`` while nothing clips, shortens it by ``step_factor`` while too
+much clips,
+    and once it has seen clipped pixels (whose radiance is the clip level, a lower bound of it
+    where only some channels clipped — the smallest one is taken) it computes ``c`` and jumps to
+    the exposure that puts the ``percentile``-th brightest judged pixel at ``headroom`` of
+    full scale. Works with any camera whose frames carry a saturation mask.
+
+    Parameters
+    ----------
+    headroom : float
+        Wanted level of the bright end, as a fraction of full scale.
+    percentile : float
+        Which pixel is the bright end (a few specular or lamp pixels may clip).
+    max_saturated : float
+        Largest clipped fraction of the judged pixels that is accepted.
+    step_factor : float
+        Factor of the blind steps, before the clip level is known.
+    tolerance : float
+        Settled when the wanted exposure is within this factor of the frame's (DSLR shutter
+        speeds come in thirds of a stop: 2^(1/3) ≈ 1.26).
+
+    Examples
+    --------
+    >>> auto = AutoExposure()
+    >>> img = np.full((100, 100, 3), 2.0, np.float32); sat = np.zeros((100, 100), bool)
+    >>> auto.step(img, sat, exposure=0.01)  # nothing clips: no clip level known yet, brighten
+    0.04
+    >>> sat[0, 0] = True; img[0, 0] = 5.0  # a lamp pixel: at 1/25 s the camera clips at radiance 5
+    >>> round(auto.step(img, sat, exposure=0.04), 4)  # put radiance 2 at 0.8 × clip
+    0.08
+    >>> auto.step(img, np.zeros((100, 100), bool), exposure=0.08) is None  # settled
+    True
+    """
+
+    headroom: float = 0.8
+    percentile: float = 99.9
+    max_saturated: float = 0.001
+    step_factor: float = 4.0
+    tolerance: float = 1.26
+    clip_constant: float | None = None  # radiance at clipping × exposure, once seen
+
+    def step(self, image, saturated, *, exposure: float, target=None) -> float | None:
+        """The next exposure to try after a frame taken at ``exposure``, or None when settled.
+
+        Parameters
+        ----------
+        image : (H, W, 3) float
+            The frame's linear radiance (``Frame.image``), under the light to expose for.
+        saturated : (H, W) bool
+            ``Frame.saturated``.
+        exposure : float
+            The exposure the frame was actually taken at (``Frame.exposure``, seconds).
+        target : (H, W) bool, optional
+            Judge only these pixels.
+
+        Raises
+        ------
+        InputError
+            Bad shapes, a non-positive exposure, or nothing to judge.
+        """
+        img = check_image("image", image)
+        h, w = img.shape[:2]
+        sat = check_mask("saturated", saturated, (h, w))
+        sel = np.ones((h, w), bool) if target is None else check_mask("target", target, (h, w))
+        exposure = check_positive("exposure", exposure)
+        if not sel.any():
+            raise InputError("target is empty: nothing to expose for")
+        if sat.any():
+            self.clip_constant = float(img[sat].max(axis=-1).min()) * exposure
+        if float(sat[sel].mean()) > self.max_saturated:
+            return exposure / self.step_factor
+        if self.clip_constant is None:
+            return exposure * self.step_factor
+        bright = float(np.percentile(img[sel].max(axis=-1), self.percentile))
+        if bright <= 0:
+            return exposure * self.step_factor
+        wanted = self.headroom * self.clip_constant / bright
+        if max(wanted / exposure, exposure / wanted) < self.tolerance:
+            return None
+        return wanted

@@ -16,6 +16,7 @@ from PySide6.QtWidgets import QWizard  # noqa: E402
 import app.calibration_wizard as wizard_module  # noqa: E402
 import devices  # noqa: E402
 from app.calibration_wizard import CalibrationWizard  # noqa: E402
+from devices.qtscreen import identify_pattern  # noqa: E402
 from devices.registry import Availability  # noqa: E402
 from engine.acquire import calibration_budget  # noqa: E402
 from engine.calibrate import Calibration, PixelStatus  # noqa: E402
@@ -254,3 +255,24 @@ def test_session_of_another_rig_is_refused(make_wizard, qtbot, tmp_path):
     assert w.currentId() == w.PAGE_PROJECTOR and w.rig is not None and w.session is None
     assert "belongs to rig 'virtual:wedge'" in w.projector_page.status.text()
     assert "choose a new session folder" in w.projector_page.status.text()
+
+
+def test_auto_exposure_and_identify_on_the_exposure_page(make_wizard, qtbot):
+    w = make_wizard()
+    w.rig_page.ideal.setChecked(False)  # the realistic camera clips; the ideal one never does
+    w.next()
+    w.next()
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=TIMEOUT_MS)
+    page, rig = w.exposure_page, w.rig
+    page.level.setCurrentIndex(2)  # identify: the grid with its centre cross goes to the projector
+    qtbot.waitUntil(lambda: page.live.frames >= 1 and page._shown == "identify", timeout=TIMEOUT_MS)
+    hp, wp = rig.projector.resolution
+    np.testing.assert_array_equal(rig.projector._input, identify_pattern((hp, wp), label=f"{rig.name}  {wp}x{hp}"))
+    page.exposure.setValue(0.01)  # 0.01 ms: far too dark
+    page.auto_button.click()
+    assert page.level.currentIndex() == 0 and not page.auto_button.isEnabled()
+    qtbot.waitUntil(lambda: page.auto is None, timeout=TIMEOUT_MS)
+    assert "settled" in page.report.text() and page.auto_button.isEnabled()
+    qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3), timeout=TIMEOUT_MS)
+    frame = rig.camera.capture()
+    assert frame.saturated.mean() <= 0.005 and frame.exposure > 1e-4

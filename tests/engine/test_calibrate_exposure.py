@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.calibrate import black_frame, exposure_report
+from engine.calibrate import AutoExposure, black_frame, exposure_report
 from engine.errors import InputError
 
 SHAPE = (50, 60)
@@ -83,3 +83,63 @@ def test_bad_inputs():
     with pytest.raises(InputError, match="same shape"):
         black_frame([img, img[:3]])
     assert exposure_report(img, target=np.zeros(SHAPE, bool)).verdict == "no pixels"
+
+
+# --- automatic exposure -------------------------------------------------------------------
+
+
+def _full_scale_level(frame, model, percentile):
+    """Where the frame's bright end sits, as a fraction of the virtual camera's clip level."""
+    clip_electrons = min(model.full_well, (model.white_level - model.black_level) * model.electrons_per_dn)
+    return np.percentile(frame.image.max(axis=-1), percentile) * model.electrons_per_radiance * frame.exposure / clip_electrons
+
+
+@pytest.mark.parametrize("start", [1e-5, 10.0])  # 12 stops under, 8 stops over
+def test_auto_exposure_converges_on_the_virtual_camera(tmp_path_factory, start):
+    import devices
+
+    cache = tmp_path_factory.getbasetemp() / "virtual-cache"
+    with devices.open_rig("virtual:cornell", resolution=(48, 48), seed=3, cache_dir=cache) as rig:
+        rig.ambient = False  # expose for the projector's white, as the wizard's Auto does
+        rig.projector.show(np.ones(rig.projector.resolution + (3,), np.float32))
+        rig.camera.exposure = start
+        auto = AutoExposure(percentile=99.5, max_saturated=0.005)
+        for steps in range(1, 16):
+            frame = rig.camera.capture()
+            wanted = auto.step(frame.image, frame.saturated, exposure=frame.exposure)
+            if wanted is None:
+                break
+            rig.camera.exposure = wanted
+        assert wanted is None and steps <= 10
+        assert frame.saturated.mean() <= 0.005
+        assert 0.8 / 1.26 <= _full_scale_level(frame, rig.camera.model, 99.5) <= 0.8 * 1.26
+
+
+def test_auto_exposure_steps_blindly_until_it_has_seen_clipping_then_remembers_it():
+    auto = AutoExposure(step_factor=2.0)
+    img = np.full(SHAPE + (3,), 1.0, np.float32)
+    none = np.zeros(SHAPE, bool)
+    assert auto.step(img, none, exposure=1.0) == 2.0
+    everything = np.ones(SHAPE, bool)
+    assert auto.step(img, everything, exposure=2.0) == 1.0  # all clipped: back off
+    assert auto.clip_constant == pytest.approx(2.0)  # radiance 1 clipped at 2 s
+    # nothing clips any more, but the clip level is known: jump straight to 0.8 of it
+    assert auto.step(img * 0.5, none, exposure=1.0) == pytest.approx(0.8 * 2.0 / 0.5)
+    # judged on the target only: the bright half outside it does not count
+    target = np.zeros(SHAPE, bool)
+    target[:, :10] = True
+    lit = img.copy()
+    lit[:, 10:] = 100.0
+    assert auto.step(lit, none, exposure=1.6, target=target) is None  # radiance 1 at 0.8 × clip: settled
+    assert auto.step(lit, none, exposure=1.6) == pytest.approx(0.016)  # the whole frame: expose for 100
+
+
+def test_auto_exposure_bad_input():
+    auto = AutoExposure()
+    img = np.ones(SHAPE + (3,), np.float32)
+    with pytest.raises(InputError, match="exposure"):
+        auto.step(img, np.zeros(SHAPE, bool), exposure=0.0)
+    with pytest.raises(InputError, match="saturated"):
+        auto.step(img, np.zeros((2, 2), bool), exposure=1.0)
+    with pytest.raises(InputError, match="target is empty"):
+        auto.step(img, np.zeros(SHAPE, bool), exposure=1.0, target=np.zeros(SHAPE, bool))
