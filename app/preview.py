@@ -69,6 +69,7 @@ class PreviewController(QObject):
         self.detail_worker.done.connect(self._on_detail)
         self.detail_worker.failed.connect(self._on_failed)
         self.viewport: tuple[tuple[int, int, int, int], float] | None = None
+        self.detail: Detail | None = None  # the newest detail of the current request
         self._detail_timer = QTimer(self)
         self._detail_timer.setSingleShot(True)
         self._detail_timer.setInterval(self.DETAIL_DELAY_MS)
@@ -189,6 +190,7 @@ class PreviewController(QObject):
 
     def _on_detail(self, rid: int, detail: Detail | None) -> None:
         if detail is not None and detail.generation == self.generation and detail.request == self.last_request:
+            self.detail = detail
             self.detail_ready.emit(detail)
 
     def _on_done(self, rid: int, frame: Frame) -> None:
@@ -198,6 +200,8 @@ class PreviewController(QObject):
         frame.request_id = rid
         self.frame = frame
         self.frame_ready.emit(frame)
+        if self.detail is not None and self.detail.request == frame.request and self.detail.generation == frame.generation:
+            self.detail_ready.emit(self.detail)  # the detail was faster than its frame (first frame of a big image)
 
     def _on_failed(self, rid: int, exc: Exception) -> None:
         self.failed.emit(f"preview failed: {exc}")

@@ -21,7 +21,7 @@ import numpy as np
 
 from app.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, recolor_rgb32, robust_max, to_rgb32
 from engine.errors import InputError
-from engine.recolor import prepare_preview, recolor, recolor_preview
+from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
 
 
 class View(StrEnum):
@@ -135,28 +135,6 @@ class Detail:
     request: Request
     second: np.ndarray | None = None
     generation: int = 0
-
-
-def area_average(image: np.ndarray, factor: int) -> np.ndarray:
-    """Mean over ``factor``×``factor`` blocks (partial blocks at the edges average what they hold).
-
-    Same blocks as :func:`engine.recolor.prepare_preview`, so the averaged photograph lines up
-    with the preview pack pixel for pixel.
-
-    Examples
-    --------
-    >>> area_average(np.arange(6, dtype=np.float32).reshape(2, 3, 1), 2)[..., 0]
-    array([[2. , 3.5]], dtype=float32)
-    """
-    if factor == 1:
-        return np.asarray(image, np.float32)
-    h, w = image.shape[:2]
-    hh, ww = -(-h // factor), -(-w // factor)
-    pad = [(0, hh * factor - h), (0, ww * factor - w)] + [(0, 0)] * (image.ndim - 2)
-    total = np.pad(image.astype(np.float32, copy=False), pad)
-    total = total.reshape((hh, factor, ww, factor) + image.shape[2:]).sum(axis=(1, 3))
-    counts = np.pad(np.ones((h, w), np.float32), pad[:2]).reshape(hh, factor, ww, factor).sum(axis=(1, 3))
-    return (total / counts.reshape((hh, ww) + (1,) * (image.ndim - 2))).astype(np.float32)
 
 
 def preview_factor(shape: tuple[int, int], max_shape: tuple[int, int]) -> int:

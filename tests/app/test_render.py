@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from app.display import MAGNITUDE_MAP, false_colour, recolor_rgb32, rgb32_to_rgb, robust_max, to_rgb32
-from app.render import DETAIL_VIEWS, Renderer, Request, View, area_average, component_grid, preview_factor
+from app.render import DETAIL_VIEWS, Renderer, Request, View, component_grid, preview_factor
 from engine.errors import InputError
 from engine.imageio import to_display
-from engine.recolor import prepare_preview, recolor, recolor_preview
+from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
 
 from .conftest import FakeTruth, make_decomposition
 
