@@ -56,7 +56,7 @@ from devices.qtscreen import identify_pattern
 from app.rig_views import CoverageMap, LiveView, ProgressEta, ResponsePlot, finish_job, rig_lock, worker_rig
 from app.worker import Job, LatestWorker, UiCaller
 from engine.acquire import calibration_budget
-from engine.calibrate import AutoExposure, exposure_report
+from engine.calibrate import AutoExposure, exposure_report, projector_lit
 from engine.errors import DeviceError, InputError, SessionError
 from engine.progress import checkpoint
 from engine.session import Session
@@ -323,7 +323,7 @@ class ExposurePage(QWizardPage):
         longer.clicked.connect(lambda: self.exposure.setValue(self.exposure.value() * 2))
         shorter.clicked.connect(lambda: self.exposure.setValue(self.exposure.value() / 2))
         self.auto_button = QPushButton("Auto")
-        self.auto_button.setToolTip("Adjust the exposure under projector white until the brightest surfaces sit just "
+        self.auto_button.setToolTip("Adjust the exposure until the brightest projector-lit surfaces sit just "
                                     "below clipping (a lamp in view may still clip: it is not projector light)")
         self.auto_button.clicked.connect(self.start_auto)
         self.level = QComboBox()
@@ -357,6 +357,7 @@ class ExposurePage(QWizardPage):
         self.auto_message = ""
         self._auto_steps = 0
         self._auto_asked: float | None = None  # the exposure of the frame the next step waits for
+        self._auto_black: np.ndarray | None = None  # radiance under projector black
 
     # -- live loop (UI thread) -------------------------------------------------------------
     def initializePage(self) -> None:  # noqa: N802 (Qt name)
@@ -410,28 +411,39 @@ class ExposurePage(QWizardPage):
 
     # -- automatic exposure (UI thread: each live frame is one step) --------------------------
     def start_auto(self) -> None:
-        """Step the exposure frame by frame under projector white until it settles."""
+        """Take a frame under projector black (what ambient light lights), then step the
+        exposure frame by frame under projector white until the projector-lit pixels settle."""
         if not self.exposure.isEnabled():
             self.report.setText(_red("This camera's exposure cannot be set from Albedit."))
             return
-        self.level.setCurrentIndex(0)
+        self.level.setCurrentIndex(1)
         self.auto = AutoExposure(percentile=99.5, max_saturated=0.005)
         self._auto_steps = 0
+        self._auto_black = None
         self._auto_asked = self.exposure.value() / 1000.0
         self.auto_button.setEnabled(False)
         self.auto_button.setText("Auto…")
 
     def _auto_step(self, result) -> None:
-        if result["level"] != "white" or result["asked"] != self._auto_asked:
+        if result["asked"] != self._auto_asked:
             return  # grabbed before the last change (the camera may round what was asked: use its value)
+        if self._auto_black is None:
+            if result["level"] == "black":
+                self._auto_black = result["image"]
+                self.level.setCurrentIndex(0)
+            return
+        if result["level"] != "white":
+            return
         self._auto_steps += 1
-        wanted = self.auto.step(result["image"], result["saturated"], exposure=result["exposure"])
+        lit = projector_lit(result["image"], self._auto_black)
+        wanted = self.auto.step(result["image"], result["saturated"], exposure=result["exposure"], target=lit)
         if wanted is None or self._auto_steps >= self.AUTO_MAX_STEPS:
             self.auto = None
             self.auto_button.setEnabled(True)
             self.auto_button.setText("Auto")
             self.auto_message = (
-                f"Auto exposure settled at {result['exposure'] * 1000:.4g} ms after {self._auto_steps} frames."
+                f"Auto exposure settled at {result['exposure'] * 1000:.4g} ms after {self._auto_steps} frames "
+                "(judged on projector-lit pixels; a lamp in view may clip: captures complete it from shorter exposures)."
                 if wanted is None else f"Auto exposure gave up after {self._auto_steps} frames: set it by hand.")
             return
         self.exposure.setValue(wanted * 1000.0)
@@ -471,7 +483,10 @@ class ExposurePage(QWizardPage):
                 worker_rig(rig, self.w.ui).projector.show(pattern)
                 self._shown = level
             frame = cam.capture()
-            report = exposure_report(frame.image, saturated=frame.saturated)
+            black = self._auto_black  # known after Auto: judge where the projector's light is
+            lit = projector_lit(frame.image, black) if black is not None and level == "white" else None
+            report = exposure_report(frame.image, saturated=frame.saturated, target=lit,
+                                     label=None if lit is None else "projector-lit pixels")
             return {
                 "image": np.asarray(frame.image, np.float32),
                 "saturated": np.asarray(frame.saturated, bool),

@@ -4,7 +4,7 @@ Pattern generators return lazy sequences of float32 ``(Hp, Wp, 3)`` projector im
 [0, 1]; fitting functions take captures as float ``(H, W, 3)`` linear radiance (Gray-code
 decoding also takes uint8/uint16 and grey images).
 
-- :mod:`~engine.calibrate.exposure`: :func:`black_frame`, :func:`exposure_report`, :class:`AutoExposure`.
+- :mod:`~engine.calibrate.exposure`: :func:`black_frame`, :func:`exposure_report`, :class:`AutoExposure`, :func:`projector_lit`.
 - :mod:`~engine.calibrate.response`: :func:`ramp_levels`, :func:`response_patterns`,
   :func:`fit_response` → :class:`ProjectorResponse` (``forward``, ``linearize``).
 - :mod:`~engine.calibrate.graycode`: :func:`gray_code_patterns`, :func:`decode_gray_code`
@@ -21,7 +21,7 @@ decoding also takes uint8/uint16 and grey images).
 from engine.calibrate.calibration import CALIBRATION_VERSION, Calibration
 from engine.calibrate.crosstalk import Crosstalk, crosstalk_patterns, fit_crosstalk
 from engine.calibrate.direct import DirectImage, direct_image, high_frequency_patterns
-from engine.calibrate.exposure import AutoExposure, ExposureReport, black_frame, exposure_report
+from engine.calibrate.exposure import AutoExposure, ExposureReport, black_frame, exposure_report, projector_lit
 from engine.calibrate.graycode import (
     Correspondence,
     PixelStatus,
@@ -71,6 +71,7 @@ __all__ = [
     "gray_code_patterns",
     "high_frequency_patterns",
     "projector_footprint",
+    "projector_lit",
     "projector_to_camera_map",
     "ramp_levels",
     "response_patterns",

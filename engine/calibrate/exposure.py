@@ -15,7 +15,7 @@ from engine._checks import check_mask
 from engine.calibrate._common import check_fraction, check_image, check_images, check_positive
 from engine.errors import InputError
 
-__all__ = ["AutoExposure", "ExposureReport", "black_frame", "exposure_report"]
+__all__ = ["AutoExposure", "ExposureReport", "black_frame", "exposure_report", "projector_lit"]
 
 
 def black_frame(captures) -> np.ndarray:
@@ -90,6 +90,7 @@ def exposure_report(
     max_saturated: float = 0.001,
     max_underexposed: float = 0.05,
     max_ambient: float = 0.5,
+    label: str | None = None,
 ) -> ExposureReport:
     """Judge a capture: how much of it is clipped, how much is too dark, how much is ambient.
 
@@ -112,6 +113,9 @@ def exposure_report(
         the image is ambient light.
     max_saturated, max_underexposed, max_ambient : float
         Limits for an ``ok`` verdict (fractions).
+    label : str, optional
+        What the judged pixels are called in the message (default "target pixels" with a
+        target, "pixels" without).
 
     Returns
     -------
@@ -157,7 +161,7 @@ def exposure_report(
     over_bad = sat_frac is not None and sat_frac > limits["max_saturated"]
     under_bad = under > limits["max_underexposed"]
     amb_bad = amb is not None and amb > limits["max_ambient"]
-    what = "target pixels" if target is not None else "pixels"
+    what = label or ("target pixels" if target is not None else "pixels")
     if sat_frac is None:
         sat_txt = "saturation not checked (no saturation mask or full scale)"
     else:
@@ -180,6 +184,38 @@ def exposure_report(
         verdict, advice = "ok", ""
     message = f"{verdict}: {facts}" + (f"; {advice}" if advice else "")
     return ExposureReport(n, sat_frac, under, amb, verdict == "ok", verdict, message)
+
+
+def projector_lit(white, black, *, min_fraction: float = 0.005) -> np.ndarray | None:
+    """Pixels whose light under projector white is mostly the projector's, not ambient.
+
+    What calibration measures is projector light, so exposure is judged there: a lamp or a
+    window in view (bright under projector black too) may clip without harm.
+
+    Parameters
+    ----------
+    white, black : (H, W, 3) float
+        Linear radiance under projector white and black (any exposures: radiance does not
+        depend on them).
+    min_fraction : float
+        Below this fraction of the frame, the mask is not trusted (too dark, or everything
+        clipped in both) and None is returned: judge the whole frame.
+
+    Returns
+    -------
+    (H, W) bool or None
+
+    Examples
+    --------
+    >>> black = np.zeros((2, 2, 3), np.float32); black[0, 0] = 10.0  # a lamp
+    >>> white = black + 1.0
+    >>> projector_lit(white, black, min_fraction=0.1).tolist()
+    [[False, True], [True, True]]
+    """
+    w = check_image("white", white)
+    b = check_image("black", black, w.shape).max(axis=-1)
+    lit = (w.max(axis=-1) - b) > b
+    return lit if lit.mean() >= min_fraction else None
 
 
 @dataclass

@@ -19,7 +19,7 @@ from app.calibration_wizard import CalibrationWizard  # noqa: E402
 from devices.qtscreen import identify_pattern  # noqa: E402
 from devices.registry import Availability  # noqa: E402
 from engine.acquire import calibration_budget  # noqa: E402
-from engine.calibrate import Calibration, PixelStatus  # noqa: E402
+from engine.calibrate import Calibration, PixelStatus, projector_lit  # noqa: E402
 from engine.errors import InputError  # noqa: E402
 from engine.session import Session  # noqa: E402
 from engine.workflow import load_calibration, run_calibration, save_calibration  # noqa: E402
@@ -269,10 +269,17 @@ def test_auto_exposure_and_identify_on_the_exposure_page(make_wizard, qtbot):
     hp, wp = rig.projector.resolution
     np.testing.assert_array_equal(rig.projector._input, identify_pattern((hp, wp), label=f"{rig.name}  {wp}x{hp}"))
     page.exposure.setValue(0.01)  # 0.01 ms: far too dark
-    page.auto_button.click()
-    assert page.level.currentIndex() == 0 and not page.auto_button.isEnabled()
+    page.auto_button.click()  # a black frame first (the lamp), then steps under white
+    assert page.level.currentIndex() == 1 and not page.auto_button.isEnabled()
     qtbot.waitUntil(lambda: page.auto is None, timeout=TIMEOUT_MS)
-    assert "settled" in page.report.text() and page.auto_button.isEnabled()
+    assert "settled" in page.report.text() and page.auto_button.isEnabled() and page.level.currentIndex() == 0
     qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3), timeout=TIMEOUT_MS)
-    frame = rig.camera.capture()
-    assert frame.saturated.mean() <= 0.005 and frame.exposure > 1e-4
+    white = rig.camera.capture()
+    rig.projector.show(np.zeros(rig.projector.resolution + (3,), np.float32))
+    lit = projector_lit(white.image, rig.camera.capture().image)
+    assert white.saturated[lit].mean() <= 0.005 and lit.mean() > 0.8
+    # the bright end of the projector-lit pixels sits near 0.8 of full scale; the lamp may clip
+    m = rig.camera.model
+    clip = min(m.full_well, (m.white_level - m.black_level) * m.electrons_per_dn) / (m.electrons_per_radiance * white.exposure)
+    assert 0.8 / 1.26 <= np.percentile(white.image.max(axis=-1)[lit], 99.5) / clip <= 0.8 * 1.26
+    assert white.saturated[~lit].any()  # the lamp is not projector light: it may clip

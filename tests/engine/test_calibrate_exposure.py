@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.calibrate import AutoExposure, black_frame, exposure_report
+from engine.calibrate import AutoExposure, black_frame, exposure_report, projector_lit
 from engine.errors import InputError
 
 SHAPE = (50, 60)
@@ -143,3 +143,14 @@ def test_auto_exposure_bad_input():
         auto.step(img, np.zeros((2, 2), bool), exposure=1.0)
     with pytest.raises(InputError, match="target is empty"):
         auto.step(img, np.zeros(SHAPE, bool), exposure=1.0, target=np.zeros(SHAPE, bool))
+
+
+def test_projector_lit_leaves_out_ambient_sources_and_distrusts_a_dark_frame():
+    black = np.zeros(SHAPE + (3,), np.float32)
+    black[:5, :5] = 50.0  # a lamp, as bright under projector black
+    white = black + 1.0
+    lit = projector_lit(white, black)
+    assert not lit[:5, :5].any() and lit[5:].all()
+    assert projector_lit(black, black) is None  # no projector light seen anywhere: judge the whole frame
+    with pytest.raises(InputError, match="black"):
+        projector_lit(white, black[:3])
