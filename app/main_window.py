@@ -130,6 +130,9 @@ class MainWindow(QMainWindow):
         Recent files; tests pass a temporary one.
     """
 
+    #: What the empty window says.
+    PLACEHOLDER = "Open a session or an image (File menu), or start the virtual-rig demo."
+
     def __init__(self, document: Document | None = None, session=None, *, synchronous: bool = False,
                  settings: QSettings | None = None, rig=None):
         super().__init__()
@@ -144,7 +147,7 @@ class MainWindow(QMainWindow):
         self.preview: PreviewController | None = None
         self.canvas: Canvas | None = None
         self.painter: Painter | None = None
-        self._placeholder = QLabel("Open a session or an image (File menu), or start the virtual-rig demo.")
+        self._placeholder = QLabel(self.PLACEHOLDER)
         self._placeholder.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.setCentralWidget(self._placeholder)
         self.resize(1500, 920)
@@ -623,12 +626,16 @@ class MainWindow(QMainWindow):
             self.job = None
             self._set_busy(False)
             self._update_actions()
+            if self.centralWidget() is self._placeholder:
+                self._placeholder.setText(self.PLACEHOLDER)
 
         job.finished.connect(finished)
         job.failed.connect(failed)
         job.cancelled.connect(lambda exc: self.statusBar().showMessage(str(exc), 8000))
         job.ended.connect(ended)
         self.progress.attach(job)
+        if self.centralWidget() is self._placeholder:  # nothing open yet: say what is coming
+            self._placeholder.setText(f"{name}…\n\nProgress, Pause and Cancel are in the status bar.")
         self._set_busy(True)
         self._update_actions()
         job.start()

@@ -258,3 +258,16 @@ def test_open_image_and_bad_paths(make_window, tmp_path, dialogs, synthetic):
     before = w.doc
     assert not w.open_path(tmp_path / "nope.exr")
     assert w.doc is before and "nope.exr" in dialogs.texts("critical")[-1]
+
+
+def test_empty_window_says_what_is_loading(make_window):
+    w = make_window()
+    seen = []
+
+    def work(progress=None, should_stop=None):
+        seen.append(w.centralWidget().text())
+        return 1
+
+    w.run_job(work, name="Opening the virtual:cornell demo")
+    assert seen[0].startswith("Opening the virtual:cornell demo…") and "Cancel" in seen[0]
+    assert w.centralWidget().text() == w.PLACEHOLDER
