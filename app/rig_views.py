@@ -445,7 +445,7 @@ class ResponsePlot(QWidget):
             p.setPen(QPen(colour, 2))
             p.drawLine(QPointF(plot.left() + 8, y + 6), QPointF(plot.left() + 24, y + 6))
             p.setPen(text)
-            b = "" if self.black_level is None else f"  black {self.black_level[c]:.3f}"
+            b = "" if self.black_level is None else f"  at black {self.black_level[c]:.3f} of white"
             p.drawText(QPointF(plot.left() + 28, y + 6 + fm.ascent() / 2 - 1), f"{label}{b}")
             y += fm.height() + 2
         p.setPen(text)

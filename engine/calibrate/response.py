@@ -133,8 +133,11 @@ class ProjectorResponse:
         Per-channel response ``f`` at ``levels``: light above black relative to full, non-
         decreasing, ``f(0) = 0``, ``f(1) = 1``.
     black_level : (3,) float64
-        ``b`` per camera channel: light with the projector all black relative to all white
-        (ambient excluded). This is the ``b`` of :func:`engine.calibrate.direct_image`.
+        ``b`` per camera channel: light with the projector all black relative to all white,
+        ambient excluded when :func:`fit_response` was given an ambient capture (a projector
+        cannot switch itself off, so :func:`engine.acquire.calibrate_rig` has none: its ``b``
+        includes the room's light). This is the ``b`` of :func:`engine.calibrate.direct_image`;
+        acquisition never needs it (every capture has the projector-black base removed).
     raw_table : (N, 3) float64
         The table as measured, before monotonic fitting (for plots and reports).
 
