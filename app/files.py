@@ -7,10 +7,11 @@ kept in the session's JSON state under ``"edits"``::
      "targets": [{"name": ..., "mask": "<mask name>", "kappa": [r, g, b], "colour": [r, g, b]}, ...],
      "current": "<target name>",
      "acquisition": {"key": ..., "cascade": [names], "kappas": [[...]], "masks": [mask names],
-                     "constraint": ..., "unreached_light": ...}}
+                     "constraint": ..., "unreached_light": ..., "denoise": radius}}
 
 Masks are stored under content-addressed names (``edit-<sha>``) and the decomposition in the
-session cache under the acquisition's key, all *before* the state is rewritten, so a save
+session cache under the acquisition's key (its noise-reduced version, if any, under
+``<key>-denoise<radius>``), all *before* the state is rewritten, so a save
 that fails half way leaves the previous save intact ("nothing lost").
 
 Which capture is the photograph: ``edits.photograph``, else ``state["photograph"]``, else a
@@ -138,7 +139,7 @@ def _document_from_session(session: Session, *, history=None) -> tuple[Document,
     plan = state.get("plan")
     if isinstance(acq, dict):
         try:
-            _restore_acquisition(doc, session, acq)
+            warnings += _restore_acquisition(doc, session, acq)
         except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
             warnings.append(f"the acquisition could not be restored ({exc}); acquire again to recolor")
     elif not edits and isinstance(plan, dict) and state.get("status") == "captured":
@@ -169,11 +170,24 @@ def _decomposition_from_cache(session: Session, key: str, acq: dict | None = Non
                          constraint, unreached_light, arrays.get("residual"))
 
 
-def _restore_acquisition(doc: Document, session: Session, acq: dict) -> None:
+def _restore_acquisition(doc: Document, session: Session, acq: dict) -> list[str]:
+    """Set the saved acquisition (and its noise reduction) on ``doc``; returns warnings."""
     key = str(acq["key"])
     d = _decomposition_from_cache(session, key, acq)
     cascade = [doc.by_name(n).uid for n in acq["cascade"]]
     doc.set_acquisition(cascade, d, key=key)
+    radius = int(acq.get("denoise", 0))
+    if radius <= 0:
+        return []
+    try:
+        doc.set_noise_reduction(radius, _decomposition_from_cache(session, _denoised_key(key, radius), acq))
+    except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
+        return [f"noise reduction (radius {radius}) could not be restored ({exc}); apply it again"]
+    return []
+
+
+def _denoised_key(key: str, radius: int) -> str:
+    return f"{key}-denoise{radius}"
 
 
 def _restore_plan(doc: Document, session: Session, plan: dict) -> None:
@@ -254,15 +268,20 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
     }
     acq = document.acquisition
     if acq is not None:
-        d = acq.decomposition
-        if not (Path(session.path) / "cache" / f"{acq.key}.npz").is_file():
-            session.cache_put(acq.key, _cache_arrays(d))
+        d = acq.raw
+        cached = {acq.key: d}
+        if acq.denoise:
+            cached[_denoised_key(acq.key, acq.denoise)] = acq.decomposition
+        for key, decomposition in cached.items():
+            if not (Path(session.path) / "cache" / f"{key}.npz").is_file():
+                session.cache_put(key, _cache_arrays(decomposition))
         edits["acquisition"] = {
             "key": acq.key,
             "cascade": [document.target(u).name for u in acq.cascade],
             "kappas": [[float(k) for k in kap] for kap in acq.kappas],
             "constraint": str(d.constraint),
             "unreached_light": bool(d.unreached_light),
+            "denoise": int(acq.denoise),
         }
     session.update(edits=edits)
     if mark_saved:
@@ -308,6 +327,7 @@ def edit_metadata(document: Document) -> dict:
             "kappa": [float(k) for k in document.recolor_kappa()],
             "order": None if d is None else int(d.order),
             "constraint": None if d is None else str(d.constraint),
+            "denoise": 0 if acq is None else int(acq.denoise),
         }
     }
 

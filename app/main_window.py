@@ -33,7 +33,7 @@ from app.canvas import Canvas
 from app.history import History
 from app.model import Document
 from app.painting import Painter, Tool
-from app.panels import AlbedoPanel, TargetPanel
+from app.panels import AlbedoPanel, NoiseReductionPanel, TargetPanel
 from app.preview import PreviewController
 from app.qt_history import QtHistory
 from app.render import View, component_grid
@@ -317,6 +317,7 @@ class MainWindow(QMainWindow):
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, d)
         self.target_panel: TargetPanel | None = None
         self.albedo_panel: AlbedoPanel | None = None
+        self.noise_panel: NoiseReductionPanel | None = None
 
     def _build_status(self) -> None:
         sb = self.statusBar()
@@ -365,8 +366,10 @@ class MainWindow(QMainWindow):
         self.target_panel = TargetPanel(document)
         self.target_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         self.albedo_panel = AlbedoPanel(document)
+        self.noise_panel = NoiseReductionPanel(document)
+        self.noise_panel.apply_requested.connect(self.apply_noise_reduction)
         self.targets_dock.setWidget(self.target_panel)
-        self.albedo_dock.setWidget(self._padded(self.albedo_panel))
+        self.albedo_dock.setWidget(self._padded(self.albedo_panel, self.noise_panel))
         ev = document.events
         ev.dirty.connect(lambda _d: self._update_title())
         ev.warning.connect(lambda m: self.statusBar().showMessage(m, 8000))
@@ -397,10 +400,12 @@ class MainWindow(QMainWindow):
                 shutil.rmtree(scratch, ignore_errors=True)
 
     @staticmethod
-    def _padded(w: QWidget) -> QWidget:
+    def _padded(*widgets: QWidget) -> QWidget:
         box = QWidget()
         lay = QVBoxLayout(box)
-        lay.addWidget(w)
+        for w in widgets:
+            lay.addWidget(w)
+            lay.addSpacing(8)
         lay.addStretch(1)
         return box
 
@@ -643,13 +648,32 @@ class MainWindow(QMainWindow):
 
     def _set_busy(self, busy: bool) -> None:
         """While a job runs the document is read by it: no edits, no undo."""
-        for w in (self.canvas, self.target_panel, self.albedo_panel):
+        for w in (self.canvas, self.target_panel, self.albedo_panel, self.noise_panel):
             if w is not None:
                 w.setEnabled(not busy)
         stacks = self.undo_group.stacks()
         self.undo_group.setActiveStack(None if busy or not stacks else stacks[-1])
 
     # ================================================================== files
+    def apply_noise_reduction(self, radius: int) -> None:
+        """Noise-reduce the acquired decomposition with ``radius`` (a job; 0 switches it off)."""
+        doc = self.doc
+        acq = None if doc is None else doc.acquisition
+        if acq is None or int(radius) == acq.denoise:
+            return
+        if int(radius) == 0:
+            doc.set_noise_reduction(0)
+            return
+        from engine.denoise import denoise_components
+
+        def done(d):
+            if doc is self.doc and doc.acquisition is not None and doc.acquisition.raw is acq.raw:
+                doc.set_noise_reduction(int(radius), d)
+                self.statusBar().showMessage(f"Noise reduction applied (radius {int(radius)} px)", 8000)
+
+        self.run_job(denoise_components, acq.raw, doc.photograph, radius=int(radius), name="Noise reduction",
+                     on_done=done)
+
     def open_demo(self, rig_name: str = "virtual:cornell") -> None:
         """Open the virtual rig with its scene targets painted (on a worker, with progress)."""
         if not self.maybe_save():

@@ -13,7 +13,7 @@ the one :func:`engine.recolor.recolor` applies to the decomposition.
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -73,6 +73,8 @@ class Acquisition:
     ``decomposition`` is the last target's decomposition, computed from observations that
     already carry the earlier targets' κ (paper, Algorithm 1); ``kappas`` are those κ.
     ``masks`` are the acquired masks (copies); ``key`` names the measurement (session cache).
+    With noise reduction (``denoise`` > 0, :func:`engine.denoise.denoise_components` of that
+    radius) ``decomposition`` is the filtered one and ``measured`` the one measured.
     """
 
     cascade: tuple[int, ...]
@@ -80,6 +82,13 @@ class Acquisition:
     masks: tuple[np.ndarray, ...]
     decomposition: Any
     key: str
+    denoise: int = 0
+    measured: Any = None
+
+    @property
+    def raw(self):
+        """The decomposition as measured (before noise reduction)."""
+        return self.decomposition if self.measured is None else self.measured
 
 
 class DocumentEvents(SignalGroup):
@@ -445,6 +454,37 @@ class Document:
         )
         # Undoing an earlier edit of a now-locked target would break the measurement.
         self.history.clear()
+        self._dirty_outside_history = True
+        self.events.acquisition.emit()
+        self._emit_dirty()
+
+    def set_noise_reduction(self, radius: int, decomposition=None) -> None:
+        """Use ``decomposition`` — the measured one noise-reduced with ``radius`` — for recoloring.
+
+        Not undoable (a computed result, like the acquisition itself); ``radius`` 0 goes back
+        to the measured decomposition and needs none.
+
+        Raises
+        ------
+        InputError
+            Nothing acquired, a negative radius, a missing decomposition for ``radius`` > 0, or
+            one of another shape or target.
+        """
+        acq = self.acquisition
+        if acq is None:
+            raise InputError("nothing is acquired yet: noise reduction filters a decomposition")
+        radius = int(radius)
+        if radius < 0:
+            raise InputError(f"noise reduction radius must be >= 0 pixels, got {radius}")
+        if radius == 0:
+            decomposition = acq.raw
+        elif decomposition is None:
+            raise InputError("noise reduction needs the filtered decomposition")
+        elif decomposition.components.shape != acq.raw.components.shape or not np.array_equal(
+                decomposition.target, acq.raw.target):
+            raise InputError("the filtered decomposition does not match the measured one (shape or target)")
+        self.acquisition = replace(acq, decomposition=decomposition, denoise=radius,
+                                   measured=None if radius == 0 else acq.raw)
         self._dirty_outside_history = True
         self.events.acquisition.emit()
         self._emit_dirty()

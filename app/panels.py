@@ -24,6 +24,7 @@ from PySide6.QtWidgets import (
     QMessageBox,
     QPushButton,
     QSlider,
+    QSpinBox,
     QToolButton,
     QVBoxLayout,
     QWidget,
@@ -314,3 +315,58 @@ class AlbedoPanel(QWidget):
     def _reset(self) -> None:
         if self.uid != -1:
             self.doc.reset_kappa(self.uid)
+
+
+class NoiseReductionPanel(QWidget):
+    """Noise reduction of the acquired decomposition: a radius and Apply.
+
+    Recoloring multiplies the noise of interaction component i by κ^{i+1}; the filter
+    (:func:`engine.denoise.denoise_components`) smooths the interreflection components along
+    the photograph's edges and leaves κ = 1 unchanged. Applying it is a job of a few seconds
+    on large images, so it is asked for (:attr:`apply_requested`), not run on every change.
+
+    Signals
+    -------
+    apply_requested(int)
+        The radius to apply (0: back to the measured decomposition).
+    """
+
+    apply_requested = Signal(int)
+
+    def __init__(self, document: Document, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.doc = document
+        self.radius = QSpinBox()
+        self.radius.setRange(0, 32)
+        self.radius.setSuffix(" px")
+        self.radius.setSpecialValueText("off")
+        self.radius.setValue(4)
+        self.radius.setToolTip("Filter radius: larger removes more noise and blurs interreflections more (0 = off)")
+        self.apply = QPushButton("Apply")
+        self.apply.setToolTip("Smooth the interreflection components along the photograph's edges; "
+                              "κ = 1 still gives the photograph exactly")
+        self.apply.clicked.connect(lambda: self.apply_requested.emit(self.radius.value()))
+        self.state = QLabel()
+        self.state.setWordWrap(True)
+        self.state.setStyleSheet("color: palette(placeholder-text);")
+        row = QHBoxLayout()
+        row.addWidget(QLabel("Noise reduction"))
+        row.addWidget(self.radius, 1)
+        row.addWidget(self.apply)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addLayout(row)
+        lay.addWidget(self.state)
+        document.events.acquisition.connect(self._update)
+        self._update()
+
+    def _update(self) -> None:
+        acq = self.doc.acquisition
+        for w in (self.radius, self.apply):
+            w.setEnabled(acq is not None)
+        if acq is None:
+            self.state.setText("Acquire a target first: noise reduction filters its decomposition.")
+        elif acq.denoise:
+            self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it).")
+        else:
+            self.state.setText("Off: the decomposition as measured.")

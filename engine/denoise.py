@@ -12,15 +12,20 @@ filtered (R^0 L_d inside, L̄_d outside), so ``recolor(·, κ = 1)`` is unchange
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor, as_completed
+
 import cv2
 import numpy as np
 
 from engine._checks import check_float_image
 from engine.decompose import Decomposition
 from engine.errors import InputError
+from engine.progress import Progress, ShouldStop, checkpoint, report
 
 
-def denoise_components(decomposition: Decomposition, photograph, *, radius: int = 4, eps: float = 1e-3) -> Decomposition:
+def denoise_components(decomposition: Decomposition, photograph, *, radius: int = 4, eps: float = 1e-3,
+                       progress: Progress | None = None, should_stop: ShouldStop | None = None) -> Decomposition:
     """Return a decomposition whose interreflection components are guided-filtered.
 
     Parameters
@@ -33,6 +38,11 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     eps : float
         Guided-filter regulariser on the log guide's variance: edges with log-contrast well
         above ``sqrt(eps)`` are kept.
+    progress : callable, optional
+        ``progress(step, total, message)`` after each (region, channel).
+    should_stop : callable, optional
+        Polled before each component is filtered; True raises
+        :class:`~engine.errors.Cancelled` (the input is never modified).
 
     Returns
     -------
@@ -45,7 +55,10 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     Notes
     -----
     Measured on the realistic virtual Cornell box (128×128, κ = (2, 0.125, 8), 16 frames):
-    relative error 7.5 % → 4.1 % at 3rd order and 12.3 % → 6.6 % at 4th order.
+    relative error 7.5 % → 4.1 % at 3rd order and 12.3 % → 6.6 % at 4th order. Each guide
+    channel's statistics are computed once per region and shared by every component, each
+    region is filtered in its bounding box, and channels run in parallel: 4.4 s for an
+    8-megapixel K = 4 decomposition on 2 cores (``bench/denoise.py``).
     """
     if not isinstance(decomposition, Decomposition):
         raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
@@ -61,24 +74,37 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     unreached = decomposition.unreached.astype(np.float32, copy=True)
     guide = np.log(np.maximum(photo, 1e-6 * max(float(photo.max()), 1e-30))).astype(np.float32)
     first_outside = 0 if decomposition.unreached_light else 1
-    for i in range(k):
-        regions = []
-        if i >= 1:
-            regions.append(target)
-        if i >= first_outside and i < decomposition.outside_order:
-            regions.append(~target)
-        if not regions:
-            continue
-        smoothed = comps[i].copy()
-        for region in regions:
-            smoothed = np.where(region[:, :, None], _filter_region(comps[i], guide, region, int(radius), float(eps)), smoothed)
-        delta = smoothed - comps[i]
-        comps[i] = smoothed
-        comps[0] -= np.where(inside, delta, 0)  # inside: R^0 L_d absorbs the change
-        if decomposition.unreached_light:
-            unreached -= np.where(inside, 0, delta)
-        elif i > 0:
-            comps[0] -= np.where(inside, 0, delta)
+    # which components are filtered in which region: inside the interactions 1..K-1, outside
+    # every outside component but the one that absorbs the change
+    jobs = [(region, [i for i in range(k) if (i >= 1 if inside_region else first_outside <= i < decomposition.outside_order)])
+            for inside_region, region in ((True, target), (False, ~target))]
+    smoothed = comps.copy()
+    tasks = [(region, ids, ch) for region, ids in jobs if ids and region.any() for ch in range(c)]
+
+    def run(task):
+        region, ids, ch = task
+        rows, cols = _window(region, int(radius))  # the region and the pixels its filter reads
+        sub = region[rows, cols]
+        filt = _GuidedFilter(guide[rows, cols, ch], sub, int(radius), float(eps))
+        for i in ids:
+            checkpoint(should_stop, "noise reduction")
+            view = smoothed[i, rows, cols, ch]
+            view[sub] = filt.smooth(comps[i, rows, cols, ch])[sub]
+
+    report(progress, 0, len(tasks), "noise reduction")
+    with ThreadPoolExecutor(max_workers=min(len(tasks), os.cpu_count() or 1) or 1) as pool:
+        # OpenCV and numpy release the GIL: channels run in parallel
+        for done, future in enumerate(as_completed([pool.submit(run, t) for t in tasks]), 1):
+            future.result()
+            report(progress, done, len(tasks), "noise reduction")
+    delta = smoothed - comps
+    total = delta.sum(axis=0)
+    comps = smoothed
+    comps[0] -= np.where(inside, total, 0)  # inside: R^0 L_d absorbs the change
+    if decomposition.unreached_light:
+        unreached -= np.where(inside, 0, total)
+    else:
+        comps[0] -= np.where(inside, 0, total)
     dtype = decomposition.components.dtype
     return Decomposition(
         comps.astype(dtype), unreached.astype(dtype), decomposition.target, decomposition.constraint,
@@ -86,13 +112,41 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     )
 
 
-def _filter_region(component: np.ndarray, guide: np.ndarray, region: np.ndarray, radius: int, eps: float) -> np.ndarray:
-    """Guided filter of each channel, normalised so pixels outside ``region`` do not leak in."""
-    w = region.astype(np.float32)
-    out = np.empty(component.shape, np.float32)
-    for ch in range(component.shape[-1]):
-        g = guide[..., ch] * w
-        num = cv2.ximgproc.guidedFilter(g, component[..., ch].astype(np.float32) * w, radius, eps)
-        den = cv2.ximgproc.guidedFilter(g, w, radius, eps)
-        out[..., ch] = np.where(den > 1e-3, num / np.maximum(den, 1e-3), component[..., ch])
-    return out
+def _window(region: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """The bounding box of ``region`` grown by ``margin`` (clipped to the image)."""
+    ys = np.flatnonzero(region.any(axis=1))
+    xs = np.flatnonzero(region.any(axis=0))
+    h, w = region.shape
+    return (slice(max(ys[0] - margin, 0), min(ys[-1] + margin + 1, h)),
+            slice(max(xs[0] - margin, 0), min(xs[-1] + margin + 1, w)))
+
+
+class _GuidedFilter:
+    """He et al.'s guided filter for one guide channel, normalised to ``region``.
+
+    The guide's statistics are computed once and shared by every input (each component of
+    the decomposition); pixels outside ``region`` neither leak in nor count:
+    ``smooth(p) = F(p·w) / F(w)`` with ``w`` the region's indicator, as with
+    ``cv2.ximgproc.guidedFilter(guide·w, ·, radius, eps)`` — 4 box filters per input.
+    """
+
+    def __init__(self, guide: np.ndarray, region: np.ndarray, radius: int, eps: float):
+        self.size = (2 * radius + 1, 2 * radius + 1)
+        self.w = region.astype(np.float32)
+        self.g = guide * self.w
+        self.mean_g = self._box(self.g)
+        self.denominator = self._box(self.g * self.g) - self.mean_g * self.mean_g + np.float32(eps)
+        self.norm = self._filter(self.w)
+
+    def _box(self, x: np.ndarray) -> np.ndarray:
+        return cv2.boxFilter(x, -1, self.size, normalize=True, borderType=cv2.BORDER_REFLECT)
+
+    def _filter(self, p: np.ndarray) -> np.ndarray:
+        mean_p = self._box(p)
+        a = (self._box(self.g * p) - self.mean_g * mean_p) / self.denominator
+        b = mean_p - a * self.mean_g
+        return self._box(a) * self.g + self._box(b)
+
+    def smooth(self, component: np.ndarray) -> np.ndarray:
+        num = self._filter(component.astype(np.float32) * self.w)
+        return np.where(self.norm > 1e-3, num / np.maximum(self.norm, 1e-3), component)

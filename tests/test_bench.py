@@ -15,6 +15,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 QUICK = {
+    "denoise.py": ["--height", "64", "--width", "96", "--order", "3"],
     "graycode.py": ["--camera", "24x32", "--projector", "32x64", "--repeat", "1"],
     "recolor.py": ["--megapixels", "0.05", "--order", "2"],
     "solve.py": ["--size", "40", "40", "--scipy-columns", "50", "--skip-full"],

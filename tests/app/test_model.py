@@ -180,3 +180,27 @@ def test_model_painting_and_rendering_never_import_qt():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_noise_reduction_swaps_the_decomposition_and_back(acquired_doc, synthetic):
+    from engine.denoise import denoise_components
+
+    doc = acquired_doc
+    measured = doc.decomposition
+    with pytest.raises(InputError, match="filtered decomposition"):
+        doc.set_noise_reduction(3)
+    with pytest.raises(InputError, match=">= 0"):
+        doc.set_noise_reduction(-1)
+    with pytest.raises(InputError, match="does not match"):
+        doc.set_noise_reduction(3, type(measured)(measured.components[:, :4], measured.unreached[:4], measured.target[:4]))
+    filtered = denoise_components(measured, doc.photograph, radius=3)
+    seen = []
+    doc.events.acquisition.connect(lambda: seen.append(doc.acquisition and doc.acquisition.denoise))
+    doc.set_noise_reduction(3, filtered)
+    assert doc.decomposition is filtered and doc.acquisition.raw is measured and seen == [3] and doc.is_dirty()
+    assert doc.kappa_lock(doc.by_name("floor").uid)  # still the same measurement: locks kept
+    doc.set_noise_reduction(0)
+    assert doc.decomposition is measured and doc.acquisition.measured is None and seen == [3, 0]
+    doc.discard_acquisition()
+    with pytest.raises(InputError, match="nothing is acquired"):
+        doc.set_noise_reduction(0)

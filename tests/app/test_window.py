@@ -271,3 +271,41 @@ def test_empty_window_says_what_is_loading(make_window):
     w.run_job(work, name="Opening the virtual:cornell demo")
     assert seen[0].startswith("Opening the virtual:cornell demo…") and "Cancel" in seen[0]
     assert w.centralWidget().text() == w.PLACEHOLDER
+
+
+def test_noise_reduction_applies_previews_exports_and_is_restored(make_window, acquired_doc, tmp_path, dialogs):
+    from engine.denoise import denoise_components
+
+    w = make_window(acquired_doc)
+    wall = acquired_doc.by_name("wall")
+    acquired_doc.set_kappa(wall.uid, [2.0, 0.5, 4.0])
+    measured = acquired_doc.decomposition
+    panel = w.noise_panel
+    assert panel.apply.isEnabled() and "Off" in panel.state.text()
+    panel.radius.setValue(3)
+    panel.apply.click()  # a job (synchronous in tests)
+    expected = denoise_components(measured, acquired_doc.photograph, radius=3)
+    d = acquired_doc.decomposition
+    assert acquired_doc.acquisition.denoise == 3 and "radius 3" in panel.state.text()
+    np.testing.assert_array_equal(d.components, expected.components)
+    # the preview is the pack of the filtered decomposition, and so is the export
+    kappa = acquired_doc.recolor_kappa()
+    np.testing.assert_array_equal(w.canvas.frame.pixels, to_rgb32(recolor(d, kappa)))
+    w.export(tmp_path / "out.exr", dtype="float")
+    np.testing.assert_array_equal(imageio.read_image(tmp_path / "out.exr"), recolor(expected, kappa))
+    assert imageio.read_metadata(tmp_path / "out.exr")["edit"]["denoise"] == 3
+    # saved and reopened: the same filtered decomposition, without recomputing it
+    assert w.save_as(tmp_path / "s")
+    doc, session, warnings = files.open_document(tmp_path / "s")
+    assert warnings == [] and doc.acquisition.denoise == 3
+    np.testing.assert_array_equal(doc.decomposition.components, expected.components)
+    np.testing.assert_array_equal(doc.acquisition.raw.components, measured.components)
+    # the filtered copy is a disposable cache entry: without it the edit opens unfiltered, and says so
+    for p in (tmp_path / "s" / "cache").glob("*-denoise3.npz"):
+        p.unlink()
+    doc, _, warnings = files.open_document(tmp_path / "s")
+    assert doc.acquisition.denoise == 0 and "noise reduction (radius 3) could not be restored" in warnings[0]
+    # switching it off needs no job
+    panel.radius.setValue(0)
+    panel.apply.click()
+    assert acquired_doc.decomposition is measured and "Off" in panel.state.text()

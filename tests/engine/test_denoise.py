@@ -57,3 +57,29 @@ def test_bad_arguments():
         denoise_components(d, photo, radius=0)
     with pytest.raises(InputError, match="Decomposition"):
         denoise_components(d.components, photo)
+
+
+def test_progress_and_cancel_leave_the_input_alone():
+    from engine.errors import Cancelled
+
+    truth, d, photo = _scene(2)
+    before = d.components.copy()
+    steps = []
+    denoise_components(d, photo, progress=lambda i, n, msg: steps.append((i, n)))
+    assert steps[0] == (0, 6) and steps[-1] == (6, 6)  # inside and outside × 3 channels
+    with pytest.raises(Cancelled):
+        denoise_components(d, photo, should_stop=lambda: True)
+    np.testing.assert_array_equal(d.components, before)
+
+
+def test_small_target_is_filtered_in_its_window_exactly_as_in_the_whole_image():
+    truth, d, photo = _scene(4)
+    small = np.zeros_like(d.target)
+    small[20:30, 50:60] = True
+    sub = Decomposition(d.components, np.where(small[:, :, None], 0, d.unreached), small)
+    out = denoise_components(sub, photo, radius=3)
+    # the same target in a larger canvas of zeros (its window then sits inside the image)
+    pad = lambda a, axes: np.pad(a, [(0, 0)] * axes[0] + [(8, 8), (8, 8)] + [(0, 0)] * axes[1], mode="edge")
+    big = Decomposition(pad(sub.components, (1, 1)), pad(sub.unreached, (0, 1)), pad(small, (0, 0)))
+    out_big = denoise_components(big, pad(photo, (0, 1)), radius=3)
+    np.testing.assert_allclose(out_big.components[:, 8:-8, 8:-8][:, small], out.components[:, small], rtol=1e-5, atol=1e-6)
