@@ -35,7 +35,7 @@ from engine.acquire import Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
 from engine.progress import checkpoint
-from engine.workflow import load_calibration, run_capture
+from engine.workflow import estimated_report, load_calibration, run_capture
 
 __all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
 
@@ -413,6 +413,8 @@ class AcquisitionPanel(QWidget):
         self.result = result
         lines = [f"Captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots)."]
         lines += self._left_out + [f"{name}: {prepared.report()}" for name, prepared in result.targets]
+        if self.session is not None and (line := estimated_report(self.session)):
+            lines.append(line + ".")
         self._note("\n".join(lines))
         self.eta.set_note("done")
         self.acquired.emit(result)

@@ -224,24 +224,22 @@ class Bench:
         return self.rig.truth.photograph(ambient=self.ambient, pattern=self.flood)
 
     def row(self, figure, case, image, truth, images, paper_images=None, paper_error=None, note="", *,
-            result: CascadeResult | None = None, kappas=()) -> Row:
-        """A table row; with ``result`` and its targets' ``kappas``, notes the unreachable pixels
-        and the error against the truth recolored on the emittable pixels only."""
+            result: CascadeResult | None = None) -> Row:
+        """A table row; with ``result``, notes the unreachable target pixels."""
         notes = [note] if note else []
         if result is not None:
             lost = sum(int(p.unreachable.sum()) for _, p in result.targets)
             if lost:
                 painted = sum(int(self.mask(n).sum()) for n, _ in result.targets)
-                reachable = self.rig.truth.recolor([(p.mask, k) for (_, p), k in zip(result.targets, kappas)],
-                                                   ambient=self.ambient, pattern=self.flood)
-                notes.append(f"{lost}/{painted} target px unreachable; "
-                             f"{100 * relative_error(image, reachable, ~self.lamp):.2f} % vs truth on emittable px")
+                notes.append(f"{lost}/{painted} target px unreachable (those near emittable ones estimated)")
         return Row(figure, case, self.label, self.projector, images, relative_error(image, truth),
                    relative_error(image, truth, ~self.lamp), paper_images, paper_error, "; ".join(notes))
 
 
 def _decomposed(result: CascadeResult, *, unreached_light: bool = True) -> Decomposition:
-    return decompose(result.acquisition.observations, result.acquisition.target.mask, unreached_light=unreached_light)
+    """The last target's decomposition as the product makes it (unreachable pixels near
+    emittable ones estimated from their neighbours, :mod:`engine.fill`)."""
+    return result.acquisition.target.decompose(result.acquisition.observations, unreached_light=unreached_light)
 
 
 def _adaptive_note(result: CascadeResult) -> str:
@@ -258,7 +256,7 @@ def fig6(bench: Bench, *, order: int = 4, extras: bool = True) -> list[Row]:
         res = bench.acquire([name], k, frames=frames)
         return res, bench.row("6", f"1 target, order {k}" + (f", {frames} frames" if frames else ""),
                               recolor(_decomposed(res), KAPPA_FIG6), truth, res.images, order, 0.006, note,
-                              result=res, kappas=[KAPPA_FIG6])
+                              result=res)
 
     result, main_row = run(order)
     rows = [main_row]
@@ -287,7 +285,6 @@ def fig8(bench: Bench, *, orders=(4, 5), adaptive=ADAPTIVE, extras: bool = True)
     """Wedge, left κ fixed first, right κ free (paper: 1.2 %, 16/11 images at order 4, 25/11 at 5)."""
     names = ["left", "right"]
     pairs = [("left", KAPPA_LEFT), ("right", KAPPA_RIGHT)]
-    kappas = [KAPPA_LEFT, KAPPA_RIGHT]
     truth = bench.truth(pairs)
     paper_images = {4: (16, 11), 5: (25, 11)}
     rows = []
@@ -296,7 +293,7 @@ def fig8(bench: Bench, *, orders=(4, 5), adaptive=ADAPTIVE, extras: bool = True)
         paper_error = 0.012 if order == 4 else None
         result = bench.acquire(names, order, fixed_kappa=[KAPPA_LEFT])
         rows.append(bench.row("8", f"2 targets, order {order}, brute force", recolor(_decomposed(result), KAPPA_RIGHT),
-                              truth, result.images, brute, paper_error, result=result, kappas=kappas))
+                              truth, result.images, brute, paper_error, result=result))
         if extras and order == orders[0] and bench.flood is not None:
             d0 = _decomposed(result, unreached_light=False)
             rows.append(bench.row("8", "  same, decomposed with L̄_d = 0", recolor(d0, KAPPA_RIGHT), truth, result.images,
@@ -305,7 +302,7 @@ def fig8(bench: Bench, *, orders=(4, 5), adaptive=ADAPTIVE, extras: bool = True)
             res = bench.acquire(names, order, fixed_kappa=[KAPPA_LEFT], adaptive=Adaptive(policy, threshold))
             rows.append(bench.row("8", f"2 targets, order {order}, adaptive {policy} {threshold:.0%}",
                                   recolor(_decomposed(res), KAPPA_RIGHT), truth, res.images, adapt, paper_error,
-                                  _adaptive_note(res), result=res, kappas=kappas))
+                                  _adaptive_note(res), result=res))
     if not extras:
         return rows
     order = orders[0]
@@ -328,9 +325,9 @@ def fig9(bench: Bench, *, order: int = 4) -> list[Row]:
     two = bench.acquire(["left", "right"], order, fixed_kappa=[KAPPA_FIG9])
     return [
         bench.row("9", f"union as 1 target, order {order}", recolor(_decomposed(one), KAPPA_FIG9), truth, one.images,
-                  None, 0.089, result=one, kappas=[KAPPA_FIG9]),
+                  None, 0.089, result=one),
         bench.row("9", f"2 targets in cascade, order {order}", recolor(_decomposed(two), KAPPA_FIG9), truth, two.images,
-                  None, 0.066, result=two, kappas=[KAPPA_FIG9] * 2),
+                  None, 0.066, result=two),
     ]
 
 
@@ -344,7 +341,7 @@ def fig10(bench: Bench, *, order: int = 4, adaptive=ADAPTIVE, extras: bool = Tru
 
     def row(res, case, paper_images, note=""):
         return bench.row("10", case, recolor(_decomposed(res), KAPPA_THREE[2]), truth, res.images, paper_images, 0.013,
-                         note, result=res, kappas=KAPPA_THREE)
+                         note, result=res)
 
     result = bench.acquire(names, order, fixed_kappa=fixed)
     rows = [row(result, f"3 targets, order {order}, brute force", 64)]

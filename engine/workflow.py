@@ -16,7 +16,7 @@ import numpy as np
 from engine.acquire import Adaptive, CaptureSettings, Recorder, acquire_cascade, calibrate_rig
 from engine.acquire.cascade import CascadeResult
 from engine.calibrate import Calibration
-from engine.decompose import Decomposition, decompose
+from engine.decompose import Decomposition
 from engine.errors import SessionError
 from engine.progress import Progress, ShouldStop
 from engine.session import Session
@@ -157,7 +157,7 @@ def run_capture(
     )
     last = result.targets[-1][1]
     session.write_mask(f"{targets[-1][0]}-emittable", last.mask)
-    d = decompose(result.acquisition.observations, last.mask)
+    d = last.decompose(result.acquisition.observations)
     cache_decomposition(session, d)
     session.update(
         status="captured",
@@ -167,6 +167,7 @@ def run_capture(
             "captures": result.captures,
             "clamped": result.acquisition.clamped,
             "unreachable": {name: int(p.unreachable.sum()) for name, p in result.targets},
+            "estimated": int((d.target & ~last.mask).sum()),
             "log": result.log,
         },
     )
@@ -232,9 +233,20 @@ def load_decomposition(session: Session, *, rig=None) -> Decomposition:
         Recorder(rig, session), load_calibration(session), targets, plan["order"],
         fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive,
     )
-    d = decompose(result.acquisition.observations, result.targets[-1][1].mask)
+    d = result.targets[-1][1].decompose(result.acquisition.observations)
     cache_decomposition(session, d)
     return d
+
+
+def estimated_report(session: Session) -> str:
+    """One line on the unreachable target pixels the last capture estimated (empty if none)."""
+    result = session.state.get("result") or {}
+    n = int(result.get("estimated", 0))
+    if not n:
+        return ""
+    left = sum(int(v) for v in (result.get("unreachable") or {}).values())
+    return (f"{n} unreachable target pixels were given the interaction shares of reachable neighbours "
+            f"(engine.fill); {max(left - n, 0)} farther from any keep their colour")
 
 
 def _describe(plan: dict) -> str:

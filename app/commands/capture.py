@@ -14,7 +14,7 @@ from engine.acquire import Adaptive, CaptureSettings
 from engine.errors import InputError, SessionError
 from engine.imageio import read_image
 from engine.session import Session
-from engine.workflow import load_calibration, open_session_for_rig, run_capture, save_calibration
+from engine.workflow import estimated_report, load_calibration, open_session_for_rig, run_capture, save_calibration
 
 
 def add_arguments(parser) -> None:
@@ -98,4 +98,6 @@ def run(args) -> int:
     )
     for name, prepared in result.targets:
         print(f"{name}: {prepared.report()}", file=sys.stderr)
+    if line := estimated_report(session):
+        print(line, file=sys.stderr)
     return 0

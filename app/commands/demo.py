@@ -23,7 +23,7 @@ from engine.errors import InputError
 from engine.imageio import to_display, write_image
 from engine.recolor import recolor
 from engine.session import Session
-from engine.workflow import load_decomposition, run_calibration, run_capture
+from engine.workflow import estimated_report, load_decomposition, run_calibration, run_capture
 
 
 def add_arguments(parser) -> None:
@@ -103,8 +103,9 @@ def run(args) -> int:
     err_img, scale = error_image(ours, truth)
     write_image(out / "error.png", err_img)
     session.update(edit={"kappa": args.kappa.tolist()})
+    estimated = estimated_report(session) + "\n" if estimated_report(session) else ""
     print(
-        f"{result.targets[0][1].report()}\n"
+        f"{result.targets[0][1].report()}\n{estimated}"
         f"images: {result.images} ({result.captures} camera shots, {result.predicted} predicted)\n"
         f"relative error vs ground truth: {100 * rel:.2f} % "
         f"({'denoised, radius %d; without denoising %.2f %%' % (args.denoise, 100 * raw_rel) if args.denoise else 'no denoising'}; "

@@ -26,7 +26,6 @@ from engine.acquire.recorder import Recorder
 from engine.acquire.steps import Acquisition, CaptureSettings, reemit
 from engine.acquire.target import PreparedTarget, pattern_budget, prepare_target
 from engine.calibrate import Calibration
-from engine.decompose import decompose
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
 from engine.recolor import recolor
@@ -163,8 +162,7 @@ class _Plan:
         """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ."""
         t = level - 1
         obs = self.observations(t, t, lighting, path)
-        d = decompose(obs, self.prepared[t].mask)
-        return recolor(d, self.kappas[t])
+        return recolor(self.prepared[t].decompose(obs), self.kappas[t])
 
 
 def acquire_cascade(

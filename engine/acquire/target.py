@@ -21,7 +21,9 @@ import numpy as np
 from engine._checks import check_mask
 from engine.acquire.recorder import Recorder
 from engine.calibrate import Calibration, Correspondence, fill_correspondence, high_frequency_patterns, projector_footprint
+from engine.decompose import Decomposition, decompose
 from engine.errors import InputError
+from engine.fill import fill_unreachable
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,6 +55,17 @@ class PreparedTarget:
     filled: int = 0
     direct_matrix: np.ndarray | None = None
 
+    def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3) -> Decomposition:
+        """Decompose on the emittable pixels, then estimate the unreachable ones near them.
+
+        :func:`engine.decompose.decompose` on :attr:`mask`, then
+        :func:`engine.fill.fill_unreachable` with the painted target (``mask | unreachable``):
+        unreachable pixels within ``fill_radius`` pixels of emittable ones get their
+        neighbours' interaction shares (0 leaves every one of them out).
+        """
+        d = decompose(observations, self.mask, unreached_light=unreached_light)
+        return fill_unreachable(d, self.mask | self.unreachable, np.asarray(observations)[0], radius=fill_radius)[0]
+
     def report(self) -> str:
         """One line for logs and dialogs."""
         painted = int(self.mask.sum() + self.unreachable.sum())
@@ -62,7 +75,7 @@ class PreparedTarget:
             return f"all {painted} target pixels can be re-emitted{filled}"
         return (
             f"{bad} of {painted} target pixels ({bad / max(painted, 1):.1%}) cannot be re-emitted "
-            f"(the projector does not reach them: shadowed or not decoded) and are left out{filled}"
+            f"(the projector does not reach them: shadowed or not decoded) and are not measured{filled}"
         )
 
 
