@@ -114,5 +114,9 @@ def run(args) -> int:
         f"wrote {out}/recolored.exr, recolored.png, photograph.png, truth.png, error.png in {time.monotonic() - t0:.0f} s",
         file=sys.stderr,
     )
+    gain = float(np.max(np.maximum(args.kappa, 1.0))) ** d.order
+    if rel > naive_rel and gain > 100 and not args.ideal:
+        print(f"hint: κ^K = {gain:.0f} multiplies the camera noise of the last interaction component; average more "
+              f"frames (--frames), denoise more (--denoise) or lower the order (--order 2)", file=sys.stderr)
     print(f"{100 * rel:.3f}")
     return 0
