@@ -694,11 +694,17 @@ class MainWindow(QMainWindow):
         """Open a session folder or an image; errors are shown, nothing else changes."""
         if not self.maybe_save():
             return False
+        self.statusBar().showMessage(f"Opening {Path(path).name}…")
+        QGuiApplication.setOverrideCursor(Qt.CursorShape.WaitCursor)  # large sessions take a second or two
         try:
             doc, session, warnings = files.open_document(path)
         except (InputError, OSError, Exception) as exc:  # noqa: BLE001 - any failure is shown, state unchanged
+            QGuiApplication.restoreOverrideCursor()
+            self.statusBar().clearMessage()
             self.show_error("Cannot open", exc)
             return False
+        QGuiApplication.restoreOverrideCursor()
+        self.statusBar().clearMessage()
         self.set_document(doc, session)
         self._add_recent(path)
         if warnings:

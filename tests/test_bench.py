@@ -39,3 +39,9 @@ def test_quick_benchmark_runs(name, tmp_path):
                           env=env, cwd=tmp_path, timeout=240)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "x" in done.stdout  # every benchmark prints its ratios against the alternative
+
+
+def test_albedit_bench_offers_every_benchmark():
+    from app.commands.bench import NAMES
+
+    assert set(NAMES) == {p.stem for p in BENCH.glob("*.py")}
