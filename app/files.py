@@ -284,6 +284,11 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
             "denoise": int(acq.denoise),
         }
     session.update(edits=edits)
+    if acq is not None:  # noise-reduced copies of other radii are no longer referenced (and are big)
+        keep = _denoised_key(acq.key, acq.denoise) if acq.denoise else None
+        for key in session.cache_keys():
+            if key.startswith(f"{acq.key}-denoise") and key != keep:
+                session.cache_discard(key)
     if mark_saved:
         document.mark_saved()
 

@@ -942,6 +942,22 @@ class Session:
                 pass
             return None
 
+    def cache_keys(self) -> list[str]:
+        """Keys of the cache entries present, sorted."""
+        folder = self.path / "cache"
+        if not folder.is_dir() or folder.is_symlink():
+            return []
+        return sorted(p.stem for p in folder.glob("*.npz") if p.is_file() and not p.is_symlink())
+
+    def cache_discard(self, key: str) -> None:
+        """Delete the cache entry ``key`` if there is one."""
+        _check_name("cache key", key)
+        with self._lock:
+            try:
+                (self.path / "cache" / f"{key}.npz").unlink()
+            except FileNotFoundError:
+                pass
+
     def cache_clear(self) -> None:
         """Delete every cache entry."""
         folder = self.path / "cache"

@@ -305,7 +305,12 @@ def test_noise_reduction_applies_previews_exports_and_is_restored(make_window, a
         p.unlink()
     doc, _, warnings = files.open_document(tmp_path / "s")
     assert doc.acquisition.denoise == 0 and "noise reduction (radius 3) could not be restored" in warnings[0]
-    # switching it off needs no job
+    # switching it off needs no job, and saving then drops the filtered copy from the cache
     panel.radius.setValue(0)
     panel.apply.click()
     assert acquired_doc.decomposition is measured and "Off" in panel.state.text()
+    panel.radius.setValue(2)
+    panel.apply.click()
+    assert w.save()
+    assert [k for k in Session.open(tmp_path / "s").cache_keys() if "-denoise" in k] == [
+        f"{acquired_doc.acquisition.key}-denoise2"]

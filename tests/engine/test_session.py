@@ -229,8 +229,15 @@ def test_cache_round_trip_and_corrupt_entries_are_missing_and_deleted(recorded, 
     with pytest.raises(InputError, match="only numeric and bool arrays"):
         session.cache_put("k", {"x": np.array(["s"])})
     session.cache_put("k", {"x": np.zeros(1)})
+    session.cache_put("j", {"x": np.zeros(1)})
+    assert session.cache_keys() == ["j", "k"]
+    session.cache_discard("j")
+    session.cache_discard("j")  # already gone: nothing to do
+    assert session.cache_keys() == ["k"]
+    with pytest.raises(InputError, match="cache key"):
+        session.cache_discard("../manifest")
     session.cache_clear()
-    assert list((recorded / "cache").iterdir()) == []
+    assert list((recorded / "cache").iterdir()) == [] and session.cache_keys() == []
 
 
 def test_create_refuses_existing_content(recorded, tmp_path):
