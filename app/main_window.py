@@ -659,7 +659,11 @@ class MainWindow(QMainWindow):
         """Noise-reduce the acquired decomposition with ``radius`` (a job; 0 switches it off)."""
         doc = self.doc
         acq = None if doc is None else doc.acquisition
-        if acq is None or int(radius) == acq.denoise:
+        if acq is None:
+            return
+        if int(radius) == acq.denoise:
+            self.statusBar().showMessage(
+                "Noise reduction is already off" if not acq.denoise else f"Radius {acq.denoise} px is already applied", 5000)
             return
         if int(radius) == 0:
             doc.set_noise_reduction(0)
