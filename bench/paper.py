@@ -45,6 +45,7 @@ import numpy as np
 import devices
 from devices.virtual import load_scene
 from engine.acquire import Adaptive, CascadeResult, Recorder, acquire_cascade, calibrate_rig, prepare_target
+from engine.acquire.predict import relative_error
 from engine.decompose import Decomposition, decompose, observe
 from engine.figurate import MAX_ORDER
 from engine.recolor import recolor
@@ -96,16 +97,6 @@ class Row:
         if fewer and self.images is not None and self.paper_images is not None and self.images < self.paper_images:
             return "fewer images, higher error"
         return "worse"
-
-
-def relative_error(image: np.ndarray, truth: np.ndarray, keep: np.ndarray | None = None) -> float:
-    """``‖image − truth‖₂ / ‖truth‖₂`` over all channels of the pixels in ``keep`` (all when None)."""
-    a = np.asarray(image, np.float64)
-    b = np.asarray(truth, np.float64)
-    if keep is not None:
-        a, b = a[keep], b[keep]
-    den = float(np.linalg.norm(b))
-    return float(np.linalg.norm(a - b) / den) if den > 0 else 0.0
 
 
 def naive_per_pixel(photograph: np.ndarray, pairs) -> np.ndarray:
@@ -166,8 +157,7 @@ class Bench:
         recorder = Recorder(self.rig, frames=self.frames)
         self.base = recorder.capture("black", recorder.black())
         self._prepared: dict = {}
-        quad = self.rig.setup.pixel_quad.reshape(self.rig.camera.resolution)
-        self.lamp = np.any(self.rig.scene.emission[np.maximum(quad, 0)] > 0, axis=-1) & (quad >= 0)
+        self.lamp = self.rig.truth.emitters()
         self.captures = 1
 
     @property

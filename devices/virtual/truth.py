@@ -256,6 +256,15 @@ class Truth:
         lit = s.proj_lit[:self._r.n_pixels].reshape(self.shape).copy()
         return xy, lit
 
+    def emitters(self) -> np.ndarray:
+        """(H, W) bool: pixels that see a light source (a lamp) directly.
+
+        Their radiance dwarfs every diffuse surface's, so a relative error over the whole
+        image mostly measures the lamp (which any method reproduces exactly); accuracy
+        figures are also given with these pixels left out.
+        """
+        return (self._r.emission[:self._r.n_pixels] > 0).any(axis=-1).reshape(self.shape)
+
     def albedo(self) -> np.ndarray:
         """(H, W, 3) float32 albedo of the surface seen at each pixel (0 where none)."""
         return self._r.rho[:self._r.n_pixels].reshape(self.shape + (3,)).astype(np.float32)

@@ -323,3 +323,13 @@ def test_cache_files_stay_inside_the_cache_dir(tmp_path):
     open_rig(str(scene), resolution=(8, 8), cache_dir=tmp_path / "cache", patch_size=0.4)
     written = [p for p in tmp_path.rglob("*.npz")]
     assert len(written) == 2 and all(p.parent == tmp_path / "cache" for p in written)
+
+
+def test_emitters_are_the_pixels_that_see_the_lamp(cache):
+    with open_rig("cornell", ideal=True, resolution=(48, 48), cache_dir=cache) as rig:
+        lamp = rig.truth.emitters()
+        photo = rig.truth.photograph().max(axis=-1)
+        assert 0 < lamp.sum() < 0.05 * lamp.size
+        assert photo[lamp].min() > 2 * photo[~lamp].max()  # brighter than any lit surface
+    with open_rig("wedge", ideal=True, resolution=(32, 32), cache_dir=cache) as rig:
+        assert not rig.truth.emitters().any()  # the wedge is lit by the projector's flood only
