@@ -8,11 +8,16 @@ session folder or an image.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from PySide6.QtCore import QTimer
+from PySide6.QtGui import QIcon
 from PySide6.QtWidgets import QApplication
 
 from app.main_window import APP_NAME, MainWindow
+
+#: The application icon (SVG, rendered by Qt at every size).
+ICON = Path(__file__).resolve().parents[1] / "resources" / "icons" / "albedit.svg"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -33,6 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     app = QApplication.instance() or QApplication([sys.argv[0] if sys.argv else "albedit"])
     app.setApplicationName(APP_NAME)
     app.setOrganizationName(APP_NAME)
+    app.setWindowIcon(QIcon(str(ICON)))
     window = MainWindow()
     window.show()
     if args:

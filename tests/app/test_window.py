@@ -314,3 +314,11 @@ def test_noise_reduction_applies_previews_exports_and_is_restored(make_window, a
     assert w.save()
     assert [k for k in Session.open(tmp_path / "s").cache_keys() if "-denoise" in k] == [
         f"{acquired_doc.acquisition.key}-denoise2"]
+
+
+def test_application_icon_renders(qtbot):
+    from PySide6.QtGui import QIcon
+
+    from app.gui import ICON
+
+    assert not QIcon(str(ICON)).pixmap(32, 32).isNull()
