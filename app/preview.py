@@ -133,7 +133,9 @@ class PreviewController(QObject):
         """New renderer for the document's photograph and acquisition (drops older frames)."""
         self.generation += 1
         truth = self._truth if self.doc.truth is not None else None
-        self.renderer = Renderer(self.doc.photograph, self.doc.decomposition, truth=truth, max_shape=self.max_shape)
+        emitters = getattr(self.doc.truth, "emitters", None)
+        self.renderer = Renderer(self.doc.photograph, self.doc.decomposition, truth=truth,
+                                 emitters=emitters() if callable(emitters) else None, max_shape=self.max_shape)
         self.request()
 
     def request(self) -> int:

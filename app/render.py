@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from app.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, recolor_rgb32, robust_max, to_rgb32
+from engine.acquire.predict import relative_error
 from engine.errors import InputError
 from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
 
@@ -175,14 +176,19 @@ class Renderer:
     truth : callable, optional
         ``truth(edit) -> (H, W, 3)`` full-resolution ground truth of an edit (virtual rig),
         where ``edit`` is the request's ``edit``; see :class:`app.preview.PreviewController`.
+    emitters : (H, W) bool, optional
+        Pixels that see a lamp (``rig.truth.emitters()``): the error view also reports the
+        error without them, since a lamp dominates the image's norm.
     max_shape : (h, w)
         Largest preview size (the screen, in device pixels).
     """
 
-    def __init__(self, photograph: np.ndarray, decomposition=None, *, truth=None, max_shape=(1080, 1920)):
+    def __init__(self, photograph: np.ndarray, decomposition=None, *, truth=None, emitters=None,
+                 max_shape=(1080, 1920)):
         self.photograph = photograph
         self.decomposition = decomposition
         self.truth = truth
+        self.emitters = emitters
         self.shape: tuple[int, int] = photograph.shape[:2]
         self.factor = preview_factor(self.shape, max_shape)
         self.pack = None
@@ -244,10 +250,13 @@ class Renderer:
         lin = self.recolored_small(request.kappa)
         err = np.abs(luminance(lin) - luminance(truth_small))
         s = robust_max(err)
-        rel = float(np.linalg.norm(lin - truth_small) / max(float(np.linalg.norm(truth_small)), 1e-30))
+        note = f"relative error {100 * relative_error(lin, truth_small):.2f} %"
+        if self.emitters is not None and self.emitters.any():
+            surfaces = area_average(self.emitters.astype(np.float32), self.factor) == 0
+            note += f", {100 * relative_error(lin, truth_small, surfaces):.2f} % without the lamp"
         return Frame(view, false_colour(err, 0.0, s, MAGNITUDE_MAP), self.shape, linear=lin,
                      scale=ScaleBar(0.0, s, MAGNITUDE_MAP, "|recolored − ground truth| (luminance)"),
-                     note=f"relative error {100 * rel:.2f} % (preview resolution)")
+                     note=note + " (preview resolution)")
 
     def render_detail(self, request: Request, region: tuple[int, int, int, int]) -> Detail | None:
         """Full-resolution pixels of ``region`` = (y0, y1, x0, x1) in ``request``'s view.

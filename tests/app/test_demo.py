@@ -69,7 +69,7 @@ def test_window_demo_saves_a_copy_and_cleans_up(make_window, tmp_path, monkeypat
     scratch = w.scratch
     assert "demo (not saved)" in w.windowTitle() and w.rig is not None
     w.set_view(View.ERROR)
-    assert w.canvas.frame.note.startswith("relative error")
+    assert w.canvas.frame.note.startswith("relative error") and "without the lamp" in w.canvas.frame.note
     assert w.save_as(tmp_path / "kept")
     assert not scratch.exists() and w.scratch is None
     doc, session, _ = files.open_document(tmp_path / "kept")
