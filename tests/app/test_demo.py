@@ -87,14 +87,20 @@ from PySide6.QtWidgets import QApplication
 from app.gui import main
 from app.main_window import MainWindow
 
-def check():
+tries = [0]
+
+def check():  # the path opens on a worker: wait for it (up to 20 s)
     windows = [w for w in QApplication.topLevelWidgets() if isinstance(w, MainWindow) and w.isVisible()]
+    tries[0] += 1
+    if (not windows or windows[0].doc is None) and tries[0] < 200:
+        QTimer.singleShot(100, check)
+        return
     print("windows", len(windows), "document", windows[0].doc.shape if windows and windows[0].doc else None)
     for w in windows:
         w.close()
 
 app = QApplication(["albedit"])  # main() uses the running application
-QTimer.singleShot(500, check)
+QTimer.singleShot(100, check)
 print("exit", main([sys.argv[1]]))
 """
 
@@ -110,6 +116,6 @@ def test_gui_main_opens_a_path_and_returns(tmp_path, synthetic):
     imageio.write_image(tmp_path / "p.exr", photo)
     env = dict(os.environ, QT_QPA_PLATFORM="offscreen", XDG_CONFIG_HOME=str(tmp_path / "config"))
     out = subprocess.run([sys.executable, "-c", _MAIN_SCRIPT, str(tmp_path / "p.exr")], env=env,
-                         capture_output=True, text=True, timeout=30, cwd=os.getcwd())
+                         capture_output=True, text=True, timeout=60, cwd=os.getcwd())
     assert out.returncode == 0, out.stderr
     assert "windows 1 document (48, 64)" in out.stdout and "exit 0" in out.stdout
