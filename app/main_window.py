@@ -86,11 +86,14 @@ class JobProgress(QWidget):
         self.job: Job | None = None
         self.hide()
 
-    def attach(self, job: Job) -> None:
+    def attach(self, job: Job, *, pausable: bool = True, cancellable: bool = True) -> None:
+        """Follow ``job``; Pause and Cancel are shown only where the job honours them."""
         self.job = job
         self.label.setText(job.name)
         self.bar.setRange(0, 0)
         self.pause.setChecked(False)
+        self.pause.setVisible(pausable)
+        self.cancel.setVisible(cancellable)
         job.progress.connect(self._on_progress)
         job.paused.connect(self.pause.setChecked)
         job.ended.connect(self._on_ended)
@@ -611,8 +614,13 @@ class MainWindow(QMainWindow):
                           "change their albedo with every interreflection following.")
 
     # ================================================================== jobs
-    def run_job(self, fn, *args, name: str, on_done=None, on_failed=None, **kwargs) -> Job:
-        """Run ``fn(*args, progress=, should_stop=, **kwargs)`` as the window's job."""
+    def run_job(self, fn, *args, name: str, on_done=None, on_failed=None, pausable: bool = True,
+                cancellable: bool = True, **kwargs) -> Job:
+        """Run ``fn(*args, progress=, should_stop=, **kwargs)`` as the window's job.
+
+        ``pausable`` / ``cancellable``: whether ``fn`` polls ``should_stop`` often enough for
+        Pause / Cancel to mean something (they are hidden otherwise).
+        """
         if self.job is not None:
             raise InputError(f"{self.job.name} is still running")
         job = Job(fn, *args, name=name, synchronous=self.synchronous, parent=self, **kwargs)
@@ -639,9 +647,9 @@ class MainWindow(QMainWindow):
         job.failed.connect(failed)
         job.cancelled.connect(lambda exc: self.statusBar().showMessage(str(exc), 8000))
         job.ended.connect(ended)
-        self.progress.attach(job)
+        self.progress.attach(job, pausable=pausable, cancellable=cancellable)
         if self.centralWidget() is self._placeholder:  # nothing open yet: say what is coming
-            self._placeholder.setText(f"{name}…\n\nProgress, Pause and Cancel are in the status bar.")
+            self._placeholder.setText(f"{name}…\n\nIts progress is in the status bar.")
         self._set_busy(True)
         self._update_actions()
         job.start()
@@ -717,7 +725,7 @@ class MainWindow(QMainWindow):
             if warnings:
                 QMessageBox.warning(self, "Opened with warnings", "\n".join(warnings))
 
-        self.run_job(work, name=f"Opening {Path(path).name}", on_done=done,
+        self.run_job(work, name=f"Opening {Path(path).name}", on_done=done, pausable=False,
                      on_failed=lambda exc: self.show_error("Cannot open", exc))
         return bool(outcome.get("ok")) if self.synchronous else True
 
@@ -788,7 +796,7 @@ class MainWindow(QMainWindow):
             self._update_title()
             self.statusBar().showMessage(f"Saved {s.path}", 5000)
 
-        self.run_job(work, name="Saving", on_done=done)
+        self.run_job(work, name="Saving", on_done=done, pausable=False, cancellable=False)
         return bool(outcome.get("ok")) if self.synchronous else True
 
     def _on_export(self) -> None:

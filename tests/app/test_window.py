@@ -269,7 +269,7 @@ def test_empty_window_says_what_is_loading(make_window):
         return 1
 
     w.run_job(work, name="Opening the virtual:cornell demo")
-    assert seen[0].startswith("Opening the virtual:cornell demo…") and "Cancel" in seen[0]
+    assert seen[0].startswith("Opening the virtual:cornell demo…") and "status bar" in seen[0]
     assert w.centralWidget().text() == w.PLACEHOLDER
 
 
@@ -322,3 +322,21 @@ def test_application_icon_renders(qtbot):
     from app.gui import ICON
 
     assert not QIcon(str(ICON)).pixmap(32, 32).isNull()
+
+
+def test_job_progress_offers_pause_and_cancel_only_where_they_work(make_window, acquired_doc, tmp_path):
+    w = make_window(acquired_doc)
+    shown = {}
+    attach = w.progress.attach
+
+    def spy(job, **kw):  # what the status bar shows while each job runs
+        attach(job, **kw)
+        shown[job.name] = (w.progress.pause.isVisibleTo(w), w.progress.cancel.isVisibleTo(w))
+
+    w.progress.attach = spy
+    w.save_as(tmp_path / "s")
+    w.open_path(tmp_path / "s")
+    assert shown["Saving"] == (False, False) and shown["Opening s"] == (False, True)
+    w.noise_panel.radius.setValue(2)
+    w.noise_panel.apply.click()
+    assert shown["Noise reduction"] == (True, True)
