@@ -844,7 +844,7 @@ class MainWindow(QMainWindow):
     def _wait_for_job(self, timeout: float = 60.0) -> None:
         """Let the running job finish, keeping the UI thread serving it (it may ask for UI calls)."""
         job, waited = self.job, 0.0
-        while job is not None and job.running and waited < timeout:
+        while job is not None and self.job is job and waited < timeout:  # until its end reached the window
             QGuiApplication.processEvents()
             job.join(0.02)
             waited += 0.02
