@@ -84,7 +84,7 @@ def measure_app(app, doc, *, synchronous: bool, events: int) -> np.ndarray:
     """Latency of the app's own path: slider.setValue → model → preview → canvas painted."""
     preview = PreviewController(doc, max_shape=VIEW, synchronous=synchronous)
     canvas = Canvas(doc, Painter(doc))
-    canvas.show_overlays = False
+    canvas.show_overlays = True  # as in the app: target outlines drawn over every frame
     canvas.resize(VIEW[1], VIEW[0])
     canvas.show()
     preview.frame_ready.connect(canvas.set_frame)
@@ -111,7 +111,7 @@ def measure_app(app, doc, *, synchronous: bool, events: int) -> np.ndarray:
 def measure_full_resolution(app, doc, *, events: int) -> np.ndarray:
     """The obvious alternative: full-resolution recolor + display conversion + resize per event."""
     canvas = Canvas(doc, Painter(doc))
-    canvas.show_overlays = False
+    canvas.show_overlays = True  # as in the app: target outlines drawn over every frame
     canvas.resize(VIEW[1], VIEW[0])
     canvas.show()
     d = doc.decomposition
