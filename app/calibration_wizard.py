@@ -358,6 +358,7 @@ class ExposurePage(QWizardPage):
         self._auto_steps = 0
         self._auto_asked: float | None = None  # the exposure of the frame the next step waits for
         self._auto_black: np.ndarray | None = None  # radiance under projector black
+        self._patterns: dict = {}  # projector images of the levels, by (level, rig, resolution)
 
     # -- live loop (UI thread) -------------------------------------------------------------
     def initializePage(self) -> None:  # noqa: N802 (Qt name)
@@ -402,12 +403,15 @@ class ExposurePage(QWizardPage):
         self.worker.submit((exposure, self._pattern()))
 
     def _pattern(self) -> tuple[str, np.ndarray]:
-        """(key, projector image) of the chosen projector level."""
+        """(key, projector image) of the chosen projector level (made once per rig and level)."""
         hp, wp = self.w.rig.projector.resolution
-        index = self.level.currentIndex()
-        if index == 2:
-            return "identify", identify_pattern((hp, wp), label=f"{self.w.rig.name}  {wp}x{hp}")
-        return ("white", "black")[index], np.full((hp, wp, 3), 1.0 if index == 0 else 0.0, np.float32)
+        key = ("white", "black", "identify")[self.level.currentIndex()]
+        cached = self._patterns.get((key, self.w.rig.name, hp, wp))
+        if cached is None:
+            cached = (identify_pattern((hp, wp), label=f"{self.w.rig.name}  {wp}x{hp}") if key == "identify"
+                      else np.full((hp, wp, 3), 1.0 if key == "white" else 0.0, np.float32))
+            self._patterns[(key, self.w.rig.name, hp, wp)] = cached
+        return key, cached
 
     # -- automatic exposure (UI thread: each live frame is one step) --------------------------
     def start_auto(self) -> None:
@@ -435,7 +439,9 @@ class ExposurePage(QWizardPage):
         if result["level"] != "white":
             return
         self._auto_steps += 1
-        lit = projector_lit(result["image"], self._auto_black)
+        lit = result["lit"]  # judged on the worker; a frame grabbed before the black one was known has none
+        if lit is None:
+            lit = projector_lit(result["image"], self._auto_black)
         wanted = self.auto.step(result["image"], result["saturated"], exposure=result["exposure"], target=lit)
         if wanted is None or self._auto_steps >= self.AUTO_MAX_STEPS:
             self.auto = None
@@ -496,6 +502,7 @@ class ExposurePage(QWizardPage):
                 "ok": report.ok,
                 "level": level,
                 "asked": exposure,
+                "lit": lit,
                 "thread": threading.current_thread().name,
             }
         finally:

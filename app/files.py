@@ -272,8 +272,9 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
         cached = {acq.key: d}
         if acq.denoise:
             cached[_denoised_key(acq.key, acq.denoise)] = acq.decomposition
+        present = set(session.cache_keys())
         for key, decomposition in cached.items():
-            if not (Path(session.path) / "cache" / f"{key}.npz").is_file():
+            if key not in present:
                 session.cache_put(key, _cache_arrays(decomposition))
         edits["acquisition"] = {
             "key": acq.key,
@@ -286,7 +287,7 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
     session.update(edits=edits)
     if acq is not None:  # noise-reduced copies of other radii are no longer referenced (and are big)
         keep = _denoised_key(acq.key, acq.denoise) if acq.denoise else None
-        for key in session.cache_keys():
+        for key in present:
             if key.startswith(f"{acq.key}-denoise") and key != keep:
                 session.cache_discard(key)
     if mark_saved:

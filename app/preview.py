@@ -20,7 +20,7 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from app.model import Document
-from app.render import DETAIL_VIEWS, NEEDS_DECOMPOSITION, NEEDS_TRUTH, Detail, Frame, Renderer, Request, View
+from app.render import DETAIL_VIEWS, NEEDS_DECOMPOSITION, NEEDS_TRUTH, Detail, Frame, Renderer, Request, View, clip_region
 from app.worker import LatestWorker
 
 
@@ -116,8 +116,9 @@ class PreviewController(QObject):
         r = self.renderer
         if r is None or self.viewport is None or self.view not in DETAIL_VIEWS:
             return False
-        (y0, y1, x0, x1), zoom = self.viewport
-        area = max(min(y1, r.shape[0]) - max(y0, 0), 0) * max(min(x1, r.shape[1]) - max(x0, 0), 0)
+        region, zoom = self.viewport
+        y0, y1, x0, x1 = clip_region(region, r.shape)
+        area = max(y1 - y0, 0) * max(x1 - x0, 0)
         return r.factor > 1 and r.factor * zoom >= self.DETAIL_MAGNIFICATION and 0 < area <= self.MAX_DETAIL_PIXELS
 
     def available(self, view: View) -> bool:
@@ -202,8 +203,8 @@ class PreviewController(QObject):
         frame.request_id = rid
         self.frame = frame
         self.frame_ready.emit(frame)
-        if self.detail is not None and self.detail.request == frame.request and self.detail.generation == frame.generation:
-            self.detail_ready.emit(self.detail)  # the detail was faster than its frame (first frame of a big image)
+        if self.detail is not None:  # it may have been faster than its frame; the canvas keeps only a match
+            self.detail_ready.emit(self.detail)
 
     def _on_failed(self, rid: int, exc: Exception) -> None:
         self.failed.emit(f"preview failed: {exc}")

@@ -268,14 +268,17 @@ class Renderer:
         view = View(request.view)
         if self.factor == 1 or view not in DETAIL_VIEWS:
             return None
-        y0, y1, x0, x1 = _clip_region(region, self.shape)
+        y0, y1, x0, x1 = clip_region(region, self.shape)
         if y1 <= y0 or x1 <= x0:
             return None
-        photo = to_rgb32(np.ascontiguousarray(self.photograph[y0:y1, x0:x1]), exposure=request.exposure)
+
+        def photo():
+            return to_rgb32(np.ascontiguousarray(self.photograph[y0:y1, x0:x1]), exposure=request.exposure)
+
         if view == View.ORIGINAL or self.decomposition is None:
-            return Detail(photo, (y0, y1, x0, x1), request)
+            return Detail(photo(), (y0, y1, x0, x1), request)
         pixels = recolor_rgb32(self.decomposition.crop(y0, y1, x0, x1), request.kappa, exposure=request.exposure)
-        return Detail(pixels, (y0, y1, x0, x1), request, second=photo if view == View.SPLIT else None)
+        return Detail(pixels, (y0, y1, x0, x1), request, second=photo() if view == View.SPLIT else None)
 
     def recolored_small(self, kappa) -> np.ndarray:
         """Linear preview of the recolored image (the photograph when nothing is acquired)."""
@@ -358,7 +361,8 @@ class Renderer:
         return recolor(self.decomposition.crop(y, y + 1, x, x + 1), kappa)[0, 0]
 
 
-def _clip_region(region, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+def clip_region(region, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """``(y0, y1, x0, x1)`` clipped to an image of ``shape`` (may come out empty)."""
     y0, y1, x0, x1 = (int(v) for v in region)
     h, w = shape
     return max(y0, 0), min(y1, h), max(x0, 0), min(x1, w)

@@ -244,7 +244,8 @@ def estimated_report(session: Session) -> str:
     n = int(result.get("estimated", 0))
     if not n:
         return ""
-    left = sum(int(v) for v in (result.get("unreachable") or {}).values())
+    last = (session.state.get("plan") or {}).get("targets", [None])[-1]  # only the last target is filled
+    left = int((result.get("unreachable") or {}).get(last, n))
     return (f"{n} unreachable target pixels were given the interaction shares of reachable neighbours "
             f"(engine.fill); {max(left - n, 0)} farther from any keep their colour")
 

@@ -105,7 +105,8 @@ def run(args) -> int:
     err_img, scale = error_image(ours, truth)
     write_image(out / "error.png", err_img)
     session.update(edit={"kappa": args.kappa.tolist()})
-    estimated = estimated_report(session) + "\n" if estimated_report(session) else ""
+    estimated = estimated_report(session)
+    estimated += "\n" if estimated else ""
     print(
         f"{result.targets[0][1].report()}\n{estimated}"
         f"images: {result.images} ({result.captures} camera shots, {result.predicted} predicted)\n"
