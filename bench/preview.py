@@ -30,13 +30,13 @@ import numpy as np  # noqa: E402
 from PySide6.QtCore import QEventLoop  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
-from app.qt.canvas import Canvas  # noqa: E402
 from app.model.display import rgb_to_rgb32  # noqa: E402
 from app.model.document import Document  # noqa: E402
 from app.model.painting import Painter  # noqa: E402
+from app.model.render import Frame, Renderer, Request, View  # noqa: E402
+from app.qt.canvas import Canvas  # noqa: E402
 from app.qt.panels import AlbedoPanel  # noqa: E402
 from app.qt.preview import PreviewController  # noqa: E402
-from app.model.render import Frame, Renderer, Request, View  # noqa: E402
 from engine.decompose import Decomposition  # noqa: E402
 from engine.imageio import to_display  # noqa: E402
 from engine.recolor import recolor  # noqa: E402

@@ -5,8 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from app.cli.main import ProgressBar
 from app.cli._args import add_rig_options, open_rig
+from app.cli.main import ProgressBar
 from engine.workflow import open_session_for_rig, run_calibration
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli.main import ProgressBar
 from app.cli._args import add_rig_options, kappa, open_rig
+from app.cli.main import ProgressBar
 from engine.acquire import Adaptive, CaptureSettings
 from engine.errors import InputError, SessionError
 from engine.imageio import read_image

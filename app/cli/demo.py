@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli.main import ProgressBar
 from app.cli._args import kappa, resolution
+from app.cli.main import ProgressBar
 from engine.acquire import Adaptive
 from engine.acquire.predict import relative_error
 from engine.denoise import denoise_components

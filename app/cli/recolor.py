@@ -6,8 +6,8 @@ import sys
 from pathlib import Path
 
 from app.cli._args import kappa
-from engine.errors import InputError, SessionError
 from engine.denoise import denoise_components
+from engine.errors import InputError, SessionError
 from engine.imageio import to_display, write_image
 from engine.recolor import recolor
 from engine.session import Session

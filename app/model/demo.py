@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from app.model.files import unreachable_pixels
 from app.model.document import Document
+from app.model.files import unreachable_pixels
 from engine.progress import checkpoint, report
 
 DEMO_RIG = "virtual:cornell"

@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-from engine._checks import check_float_image
+from engine.checks import check_float_image
 from engine.errors import InputError
 from engine.imageio import srgb_encode
 
@@ -140,7 +140,7 @@ def recolor_rgb32(decomposition, kappa, *, exposure: float = 0.0) -> np.ndarray:
     (H, W) uint32
         ``0xFFRRGGBB`` words.
     """
-    from engine._checks import check_kappa
+    from engine.checks import check_kappa
 
     comps = np.ascontiguousarray(decomposition.components, dtype=np.float32)
     unreached = np.ascontiguousarray(decomposition.unreached, dtype=np.float32)

@@ -20,7 +20,7 @@ import numpy as np
 from psygnal import Signal, SignalGroup
 
 from app.model.history import History
-from engine._checks import check_float_image, check_kappa, check_mask
+from engine.checks import check_float_image, check_kappa, check_mask
 from engine.errors import InputError
 
 #: Slider range of κ (log scale), as in the issue: 1/16 … 16.

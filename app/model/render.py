@@ -197,7 +197,7 @@ class Renderer:
         self._truth_cache: tuple[Any, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ preparation
-    def prepare(self) -> "Renderer":
+    def prepare(self) -> Renderer:
         """Compute the reduced copies (slow for big images: run it on a worker)."""
         if self.decomposition is not None:
             self.pack = prepare_preview(self.decomposition, (-(-self.shape[0] // self.factor), -(-self.shape[1] // self.factor)))

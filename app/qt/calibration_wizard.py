@@ -52,16 +52,15 @@ from PySide6.QtWidgets import (
 )
 
 import devices
-from devices.qtscreen import identify_pattern
 from app.qt.rig_views import CoverageMap, LiveView, ProgressEta, ResponsePlot, finish_job, rig_lock, worker_rig
 from app.qt.worker import Job, LatestWorker, UiCaller
+from devices.qtscreen import identify_pattern
 from engine.acquire import calibration_budget
 from engine.calibrate import AutoExposure, exposure_report, projector_lit
 from engine.errors import DeviceError, InputError, SessionError
 from engine.progress import checkpoint
 from engine.session import Session
-from engine.workflow import open_session_for_rig
-from engine.workflow import load_calibration, run_calibration, save_calibration
+from engine.workflow import load_calibration, open_session_for_rig, run_calibration, save_calibration
 
 __all__ = ["CalibrationWizard"]
 
@@ -118,7 +117,7 @@ def _red(text: str) -> str:
 class RigPage(QWizardPage):
     """Which rig, its options, and which session folder."""
 
-    def __init__(self, wizard: "CalibrationWizard"):
+    def __init__(self, wizard: CalibrationWizard):
         super().__init__()
         self.setTitle("Choose the rig")
         self.setSubTitle("The camera and projector to calibrate, and the session folder the captures go to.")
@@ -240,7 +239,7 @@ class RigPage(QWizardPage):
 class ProjectorPage(QWizardPage):
     """The projector's screen (when the backend draws the projector as a window); opens the rig."""
 
-    def __init__(self, wizard: "CalibrationWizard"):
+    def __init__(self, wizard: CalibrationWizard):
         super().__init__()
         self.setTitle("Projector")
         self.w = wizard
@@ -310,7 +309,7 @@ class ExposurePage(QWizardPage):
     #: Frames automatic exposure may take before it gives up.
     AUTO_MAX_STEPS = 12
 
-    def __init__(self, wizard: "CalibrationWizard"):
+    def __init__(self, wizard: CalibrationWizard):
         super().__init__()
         self.setTitle("Camera exposure")
         self.setSubTitle("Under projector white, nothing on the surfaces to edit may clip (magenta), and "
@@ -513,7 +512,7 @@ class ExposurePage(QWizardPage):
 class CalibrationPage(QWizardPage):
     """Run the calibration (or reuse another session's), with progress, pause and cancel."""
 
-    def __init__(self, wizard: "CalibrationWizard"):
+    def __init__(self, wizard: CalibrationWizard):
         super().__init__()
         self.setTitle("Calibrate")
         self.setSubTitle("Black, white, the Gray code and a grey ramp. Each capture is written to the session as "
@@ -686,7 +685,7 @@ class CalibrationPage(QWizardPage):
 class ResultsPage(QWizardPage):
     """The measured response and where the Gray code decoded."""
 
-    def __init__(self, wizard: "CalibrationWizard"):
+    def __init__(self, wizard: CalibrationWizard):
         super().__init__()
         self.setTitle("Results")
         self.setSubTitle("Only decoded pixels can be re-lit by the projector: targets must lie on them.")
@@ -724,7 +723,7 @@ class ResultsPage(QWizardPage):
 class SummaryPage(QWizardPage):
     """What was done, what failed and how to fix it."""
 
-    def __init__(self, wizard: "CalibrationWizard"):
+    def __init__(self, wizard: CalibrationWizard):
         super().__init__()
         self.setTitle("Summary")
         self.setSubTitle("What was measured, and anything to fix before acquiring.")

@@ -29,14 +29,14 @@ from PySide6.QtWidgets import (
 )
 
 from app.model import files
-from app.qt.canvas import Canvas
-from app.model.history import History
 from app.model.document import Document
+from app.model.history import History
 from app.model.painting import Painter, Tool
+from app.model.render import View, component_grid
+from app.qt.canvas import Canvas
 from app.qt.panels import AlbedoPanel, NoiseReductionPanel, TargetPanel
 from app.qt.preview import PreviewController
 from app.qt.undo import QtHistory
-from app.model.render import View, component_grid
 from app.qt.worker import Job
 from engine.errors import InputError
 from engine.progress import checkpoint

@@ -20,7 +20,17 @@ import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
 from app.model.document import Document
-from app.model.render import DETAIL_VIEWS, NEEDS_DECOMPOSITION, NEEDS_TRUTH, Detail, Frame, Renderer, Request, View, clip_region
+from app.model.render import (
+    DETAIL_VIEWS,
+    NEEDS_DECOMPOSITION,
+    NEEDS_TRUTH,
+    Detail,
+    Frame,
+    Renderer,
+    Request,
+    View,
+    clip_region,
+)
 from app.qt.worker import LatestWorker
 
 

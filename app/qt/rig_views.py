@@ -18,7 +18,7 @@ import math
 import threading
 import time
 import weakref
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from PySide6.QtCore import QCoreApplication, QEventLoop, QPointF, QRectF, QSize, Qt
@@ -154,7 +154,7 @@ def format_duration(seconds: float) -> str:
     return f"{h} h {r // 60:02d} min"
 
 
-_LOCKS: "weakref.WeakKeyDictionary[object, threading.Lock]" = weakref.WeakKeyDictionary()
+_LOCKS: weakref.WeakKeyDictionary[object, threading.Lock] = weakref.WeakKeyDictionary()
 _LOCKS_GUARD = threading.Lock()
 
 

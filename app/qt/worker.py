@@ -21,7 +21,8 @@ from __future__ import annotations
 import itertools
 import threading
 import traceback
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from PySide6.QtCore import QCoreApplication, QObject, Qt, QThread, Signal, Slot
 
@@ -241,7 +242,7 @@ class Job(QObject):
         self._end.connect(self._on_end, Qt.ConnectionType.QueuedConnection)
 
     # ------------------------------------------------------------------ control (UI thread)
-    def start(self) -> "Job":
+    def start(self) -> Job:
         if self._running or self._thread is not None:
             raise RuntimeError(f"job {self.name!r} was already started")
         self._running = True

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.model.history import History
 from app.model.document import Document
+from app.model.history import History
 from engine.errors import InputError
 
 

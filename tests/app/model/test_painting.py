@@ -6,7 +6,18 @@ import numpy as np
 import pytest
 
 from app.model.document import Document
-from app.model.painting import EventType, MouseEvent, Painter, Tool, capsule, move, polygon_mask, press, release, similar_region
+from app.model.painting import (
+    EventType,
+    MouseEvent,
+    Painter,
+    Tool,
+    capsule,
+    move,
+    polygon_mask,
+    press,
+    release,
+    similar_region,
+)
 
 H, W = 40, 60
 

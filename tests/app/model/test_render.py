@@ -10,7 +10,6 @@ from app.model.render import DETAIL_VIEWS, Renderer, Request, View, component_gr
 from engine.errors import InputError
 from engine.imageio import to_display
 from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
-
 from tests.app.conftest import FakeTruth, make_decomposition
 
 

@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QPoint, QPointF, Qt
 
-from app.model.document import Document
 from app.model.display import recolor_rgb32
+from app.model.document import Document
 from app.model.painting import Tool
-
 from tests.app.model.test_painting import _capsule_reference
 
 ZOOM, OFFSET = 2.0, 10.0

@@ -9,8 +9,8 @@ from PySide6.QtWidgets import QMessageBox
 from app.model import files
 from app.model.display import to_rgb32
 from app.model.document import Document
-from app.qt.panels import kappa_to_ticks
 from app.model.render import View
+from app.qt.panels import kappa_to_ticks
 from engine import imageio
 from engine.recolor import prepare_preview, recolor, recolor_preview
 from engine.session import Session

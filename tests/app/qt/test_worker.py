@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from app.model.display import to_rgb32
-from app.qt.preview import PreviewController
 from app.model.render import View
+from app.qt.preview import PreviewController
 from app.qt.worker import Job, LatestWorker, UiCaller, on_ui_thread
 from engine.errors import Cancelled
 from engine.progress import checkpoint, report
