@@ -44,6 +44,7 @@ __all__ = [
     "ImageInfo",
     "atomic_write",
     "image_info",
+    "is_temp_name",
     "raw_postprocess_options",
     "read_image",
     "read_metadata",
@@ -279,7 +280,14 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def _is_temp_name(name: str) -> bool:
+def is_temp_name(name: str) -> bool:
+    """Whether a file name is the temporary file of an :func:`atomic_write` (left behind only by a killed write).
+
+    Examples
+    --------
+    >>> is_temp_name(".c1.exr.0a1b2c3d4e5f.tmp.exr"), is_temp_name("c1.exr")
+    (True, False)
+    """
     return name.startswith(".") and _TEMP_MARK in name
 
 
