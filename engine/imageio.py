@@ -47,6 +47,7 @@ __all__ = [
     "is_temp_name",
     "raw_postprocess_options",
     "read_image",
+    "read_mask",
     "read_metadata",
     "read_raw_bytes",
     "srgb_decode",
@@ -444,6 +445,59 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
         color = [c for c in range(image.shape[2]) if c != alpha]
         image[..., color] = srgb_decode(image[..., color])
     return np.ascontiguousarray(image)
+
+
+def read_mask(path) -> np.ndarray:
+    """Read a target mask painted in another program as ``(H, W) bool``.
+
+    The stored values are used as they are (no sRGB decoding: a 50 % grey is "painted"). A
+    pixel is in the mask when its luminance is non-zero — any grey or colour channel above 0 —
+    or, for a file with an alpha channel that is transparent somewhere, when its alpha is
+    non-zero (an alpha-only mask, whatever its colour channels hold).
+
+    Parameters
+    ----------
+    path : str or Path
+        A PNG, TIFF, EXR or JPEG file (not RAW).
+
+    Returns
+    -------
+    (H, W) bool
+
+    Raises
+    ------
+    InputError
+        Unreadable, unsupported or corrupt file (see :func:`read_image`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     grey = np.full((1, 3), 128, np.uint8); grey[0, 0] = 0
+    ...     _ = write_image(Path(d) / "m.png", grey)
+    ...     print(read_mask(Path(d) / "m.png").tolist())
+    [[False, True, True]]
+    """
+    path = _check_readable(path)
+    if _extension(path) in RAW_EXTENSIONS:
+        raise InputError(f"{path}: a mask must be a PNG, TIFF, EXR or JPEG image, not a camera RAW file")
+    pixels = read_image(path, srgb=False)
+    alpha = _alpha_index(path, pixels.shape[2])
+    if alpha is not None and (pixels[..., alpha] < 1).any():
+        return pixels[..., alpha] > 0
+    colour = [c for c in range(pixels.shape[2]) if c != alpha]
+    return (pixels[..., colour] > 0).any(axis=2)
+
+
+def _alpha_index(path: Path, channels: int) -> int | None:
+    inp = _oiio_open(path)
+    try:
+        index = inp.spec().alpha_channel
+    finally:
+        inp.close()
+    if 0 <= index < channels:
+        return index
+    return {2: 1, 4: 3}.get(channels)
 
 
 def raw_postprocess_options() -> dict[str, Any]:

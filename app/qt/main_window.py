@@ -582,12 +582,10 @@ class MainWindow(QMainWindow):
 
     def _on_acquired(self, result) -> None:
         """A finished cascade becomes the document's acquisition; the last target stays free."""
-        from engine.workflow import load_decomposition, plan_key
-
         by_name = {t.name: t.uid for t in self.doc.targets}
         try:
             cascade = [by_name[name] for name, _ in result.targets]
-            self.doc.set_acquisition(cascade, load_decomposition(self.session), key=plan_key(self.session))
+            self.doc.set_acquisition(cascade, result.decomposition, key=result.key)
         except (KeyError, InputError) as exc:
             self.show_error("Cannot use the acquisition", exc)
             return

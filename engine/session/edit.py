@@ -34,9 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from engine.denoise import MAX_RADIUS
 from engine.errors import InputError
 from engine.session.paths import NAME
-from engine.session.spec import Bool, Int, Invalid, List, Nullable, Num, Obj, Str, join
+from engine.session.spec import Bool, Int, Invalid, List, Nullable, Num, Obj, Spec, Str, join
 
 __all__ = [
     "EDIT_VERSION", "METADATA_KEY", "Edit", "EditAcquisition", "EditTarget", "check_target_name",
@@ -58,7 +59,7 @@ _KAPPA = List(Num(0), length=3, expected="[r, g, b], three finite albedo scales 
 _COLOUR = List(Int(0, 255), length=3, expected="[r, g, b], three integers in [0, 255]")
 _CACHE_KEY = Str(pattern=NAME.pattern, expected="a cache key")
 
-EDIT_SPEC = Obj(required={
+_EDIT_FIELDS = Obj(required={
     "version": Int(EDIT_VERSION, EDIT_VERSION),
     "targets": List(Obj(required={"name": _TARGET_NAME, "mask": _MASK_NAME, "kappa": _KAPPA},
                         optional={"colour": _COLOUR})),
@@ -68,9 +69,24 @@ EDIT_SPEC = Obj(required={
         "cascade": List(_TARGET_NAME, min_len=1),
         "kappas": List(_KAPPA, min_len=1),
         "decomposition": _CACHE_KEY,
-        "denoise": Int(0, 4096),
+        "denoise": Int(0, MAX_RADIUS),
     })),
 })
+
+
+
+class _EditSpec(Spec):
+    """The edit's fields, then what ties them together (unique names, a cascade of its targets)."""
+
+    expected = "a saved edit"
+
+    def check(self, value, path: str) -> None:
+        _EDIT_FIELDS.check(value, path)
+        _check_consistent(value, path)
+
+
+#: The saved edit's schema (used by the manifest schema for ``state.edit``).
+EDIT_SPEC = _EditSpec()
 
 #: What ``albedit recolor`` wrote before the engine owned the edit: the free target's κ only.
 LEGACY_CLI_EDIT_SPEC = Obj(required={"kappa": _KAPPA})
@@ -86,7 +102,7 @@ LEGACY_APP_EDIT_SPEC = Obj(
         "acquisition": Obj(
             required={"key": _CACHE_KEY, "cascade": List(_TARGET_NAME, min_len=1)},
             optional={"kappas": List(_KAPPA), "constraint": Str(max_len=32), "unreached_light": Bool(),
-                      "denoise": Int(0, 4096)},
+                      "denoise": Int(0, MAX_RADIUS)},
         ),
     },
 )
@@ -207,7 +223,6 @@ class Edit:
     def __post_init__(self) -> None:
         try:
             EDIT_SPEC.check(self.to_json(), "edit")
-            _check_consistent(self.to_json(), "edit")
         except Invalid as exc:
             raise InputError(str(exc)) from None
 
@@ -259,7 +274,6 @@ class Edit:
                 LEGACY_APP_EDIT_SPEC.check(data, where)
                 data = _from_version_1(data)
             EDIT_SPEC.check(data, where)
-            _check_consistent(data, where)
         except Invalid as exc:
             raise InputError(str(exc)) from None
         acq = data["acquisition"]
