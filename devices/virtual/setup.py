@@ -33,9 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
-import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -44,6 +42,7 @@ import scipy.sparse as sp
 
 from devices.virtual.geometry import Quads, View, blocker_table, cast_rays, occluded, polygon_form_factor, quad_corners
 from devices.virtual.scene import Scene
+from engine.imageio import atomic_write
 from engine.progress import report
 
 MODEL_VERSION = 8
@@ -218,18 +217,16 @@ def _key(obj) -> str:
 
 
 def _save_arrays(path: Path, arrays: dict) -> None:
-    """Write ``arrays`` to ``path`` atomically (temp file + rename); failures only cost time."""
+    """Write ``arrays`` to ``path`` atomically (:func:`engine.imageio.atomic_write`); failures only cost time."""
     arrays = dict(arrays, version=np.array(MODEL_VERSION))
+
+    def writer(temp: Path) -> None:
+        with open(temp, "wb") as fh:
+            np.savez(fh, **arrays)
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(path, writer)
     except OSError:
         pass
 
