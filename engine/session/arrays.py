@@ -5,6 +5,7 @@ Both read back exactly (same dtype and shape); ``.npy`` files are never unpickle
 
 from __future__ import annotations
 
+import errno
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +51,15 @@ def write_array(file: Path, array: np.ndarray) -> None:
         with open(temp, "wb") as fh:
             np.save(fh, array, allow_pickle=False)
 
-    imageio.atomic_write(file, writer)
+    def verify(temp: Path) -> None:
+        try:
+            back = np.load(temp, allow_pickle=False)
+        except (ValueError, EOFError) as exc:
+            raise OSError(errno.EIO, f"the array written does not read back ({exc})") from exc
+        if back.dtype != array.dtype or not np.array_equal(back, array, equal_nan=array.dtype.kind in "fc"):
+            raise OSError(errno.EIO, "the array written does not read back as written")
+
+    imageio.atomic_write(file, writer, verify=verify)
 
 
 def read_array(file: Path, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:

@@ -15,11 +15,17 @@ from engine import imageio
 from engine.errors import InputError, SessionError
 from engine.session.records import CaptureRecord, LoadedCapture, sha256_file
 
-__all__ = ["SATURATED_CHANNEL", "check_file", "embedded_entry", "read", "write"]
+__all__ = ["SATURATED_CHANNEL", "check_file", "inspect_orphan", "read", "size_bound", "write"]
 
 #: Name of the extra EXR channel holding a capture's saturation mask.
 SATURATED_CHANNEL = "saturated"
 _ENTRY_KEYS = ("name", "file", "pattern_id", "meta", "shape", "saturated", "time")
+
+
+def size_bound(shape: tuple[int, ...], saturated: bool) -> int:
+    """Bytes a capture of ``(H, W, 3)`` pixels takes at most on disk (float32, uncompressed, plus its header)."""
+    h, w = shape[:2]
+    return h * w * (4 if saturated else 3) * 4 + 64 * 1024
 
 
 def write(file: Path, image: np.ndarray, saturated: np.ndarray | None, embedded: dict) -> tuple[str, int]:
@@ -68,6 +74,7 @@ def read(file: Path, rec: CaptureRecord) -> LoadedCapture:
     expected = 4 if rec.has_saturated else 3
     if pixels.shape != (h, w, expected) or not np.all(np.isfinite(pixels)):
         raise SessionError(f"capture {name!r}: {file} is corrupt (shape {pixels.shape} or non-finite values)")
+    _check_identity(file, {"name": rec.name, "file": rec.file, "pattern_id": rec.pattern_id}, f"capture {name!r}")
     image = np.ascontiguousarray(pixels[..., :3])
     saturated = pixels[..., 3] > 0.5 if rec.has_saturated else np.zeros((h, w), bool)
     return LoadedCapture(rec, image, saturated)
@@ -93,28 +100,55 @@ def check_file(file: Path, entry: dict, camera, where: str, *, verify: bool) -> 
                            f"expected {camera[0]}x{camera[1]}x{channels}")
     if verify and sha256_file(file)[0] != entry["sha256"]:
         raise SessionError(f"{where}: {file} is corrupt (its checksum differs from the manifest's)")
+    _check_identity(file, entry, where)
 
 
-def embedded_entry(file: Path, rel: str, camera) -> dict | None:
-    """The manifest entry an orphan file carries, with its checksum, if it is a readable capture.
+def _check_identity(file: Path, entry: dict, where: str) -> None:
+    """SessionError unless the record the file carries names the same capture and pattern as the manifest.
 
-    Returns None for a file that is not a capture of this camera resolution naming itself
-    ``rel``, or that cannot be read in full. The entry's ``"index"`` is its original position.
+    Catches files swapped or copied over one another together with their manifest entries
+    (size and checksum then agree): each file knows which capture it is.
     """
     try:
         embedded = imageio.read_metadata(file).get("capture")
-        if not isinstance(embedded, dict):
-            return None
-        entry = {k: embedded.get(k) for k in _ENTRY_KEYS}
-        index = embedded.get("index", 0)
-        entry["index"] = index if isinstance(index, int) and not isinstance(index, bool) else 0
-        if entry["file"] != rel:
-            return None
+    except InputError as exc:
+        raise SessionError(f"{where}: {file} is corrupt: {exc}") from exc
+    if not isinstance(embedded, dict):
+        raise SessionError(f"{where}: {file} carries no capture record; it is not a capture this session wrote")
+    for key in ("name", "file", "pattern_id"):
+        if embedded.get(key) != entry[key]:
+            raise SessionError(
+                f"{where}: {file} holds the capture recorded as {embedded.get('name')!r} "
+                f"(its {key} is {embedded.get(key)!r:.80}, the manifest says {entry[key]!r:.80}): the capture files "
+                "were swapped or replaced; restore them, or recapture into a new session")
+
+
+def inspect_orphan(file: Path, rel: str, camera) -> tuple[dict | None, str | None]:
+    """What an orphan file is: ``(entry, None)`` for an adoptable capture, ``(None, why)`` for an unreadable one.
+
+    ``entry`` is the manifest entry the file carries, with its checksum and its original
+    position as ``"index"``. A readable file that is not a capture of this session naming
+    itself ``rel`` (another program's image) gives ``(None, None)``: it is left alone.
+    """
+    try:
+        embedded = imageio.read_metadata(file).get("capture")
+    except InputError as exc:
+        return None, str(exc)
+    if not isinstance(embedded, dict) or embedded.get("file") != rel:
+        try:
+            imageio.image_info(file)
+        except InputError as exc:
+            return None, str(exc)
+        return None, None
+    entry = {k: embedded.get(k) for k in _ENTRY_KEYS}
+    index = embedded.get("index", 0)
+    entry["index"] = index if isinstance(index, int) and not isinstance(index, bool) else 0
+    try:
         pixels = imageio.read_image(file, srgb=False)
-    except InputError:
-        return None
+    except InputError as exc:
+        return None, str(exc)
     expected = (*camera, 4 if entry["saturated"] else 3)
-    if pixels.shape != expected or not np.all(np.isfinite(pixels)):
-        return None
+    if pixels.shape != expected:
+        return None, f"its pixels are {pixels.shape}, a capture of this session is {expected}"
     entry["sha256"], entry["bytes"] = sha256_file(file)
-    return entry
+    return entry, None

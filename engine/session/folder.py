@@ -12,10 +12,12 @@ the work to those modules.
 from __future__ import annotations
 
 import copy
+import errno
 import os
 import shutil
-import threading
-from pathlib import Path
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
@@ -25,11 +27,13 @@ from engine.errors import InputError, SessionError
 from engine.session import arrays as _arrays
 from engine.session import cache as _cache
 from engine.session import captures as _captures
+from engine.session import lock as _lock
 from engine.session.jsonio import dumps, to_json
-from engine.session.opening import check_folder, read_manifest
+from engine.session.opening import check_folder, is_skeleton, read_manifest, remove_temporaries
 from engine.session.paths import FOLDERS, MANIFEST, check_name, inside, writable
 from engine.session.records import CaptureRecord, LoadedCapture, now, record
-from engine.session.schema import FORMAT, SCHEMA_VERSION, validate_manifest, validate_state
+from engine.session.schema import FINGERPRINT, FORMAT, SCHEMA_VERSION, validate_manifest, validate_state
+from engine.session.space import write_failed
 from engine.session.spec import Invalid
 
 __all__ = ["Session"]
@@ -41,8 +45,9 @@ class Session:
     """An Albedit session folder (see :mod:`engine.session` for the layout and guarantees).
 
     Create one with :meth:`create`, open one with :meth:`open`; don't call the constructor.
-    Methods are thread-safe (one lock around every manifest change). Two processes must not
-    write the same session at once.
+    Every write holds the session's advisory lock (:mod:`engine.session.lock`) and re-reads
+    the manifest if another writer changed it, so no update is lost; :meth:`writing` holds the
+    lock across a whole run. Methods are thread-safe.
 
     Attributes
     ----------
@@ -52,6 +57,11 @@ class Session:
         Capture files found on disk but not in the manifest (relative paths), e.g. from a
         process killed between writing a capture and updating the manifest. They are never
         deleted; :meth:`recover_orphans` adopts them.
+    quarantined : list of (str, str, str)
+        Unreadable orphans :meth:`recover_orphans` moved aside: (where it was, where it is
+        now under ``quarantine/``, why it is unreadable).
+    removed : list of str
+        Temporary files of killed writes that :meth:`open` deleted.
     """
 
     def __init__(self, path: Path, manifest: dict, orphans: list[str], *, _token=None):
@@ -60,8 +70,11 @@ class Session:
         self.path = path
         self._root = Path(os.path.realpath(path))
         self._manifest = manifest
+        self._signature = _signature(self.path)
         self._orphans = list(orphans)
-        self._lock = threading.RLock()
+        self._lock = _lock.thread_lock(self._root)
+        self.quarantined: list[tuple[str, str, str]] = []
+        self.removed: list[str] = []
 
     # ------------------------------------------------------------------ create / open
 
@@ -74,13 +87,15 @@ class Session:
         camera_resolution: tuple[int, int],
         projector_resolution: tuple[int, int],
         metadata: dict | None = None,
+        fingerprint: dict | None = None,
     ) -> Session:
         """Create a new, empty session folder.
 
         Parameters
         ----------
         path : str or Path
-            A folder that does not exist yet (it is created) or is empty.
+            A folder that does not exist yet (it is created), is empty, or holds only the empty
+            skeleton of an interrupted :meth:`create`.
         rig_name : str
             The rig's name, e.g. ``"virtual:cornell"`` or ``"gphoto2"``.
         camera_resolution, projector_resolution : (int, int)
@@ -88,6 +103,9 @@ class Session:
             ``(H, W, 3)``.
         metadata : dict, optional
             JSON facts about the session (operator, scene, projector bit depth, ...).
+        fingerprint : dict, optional
+            What the rig's calibration depends on (:attr:`engine.rig.RigLike.fingerprint`):
+            strings, numbers, booleans and lists of them.
 
         Returns
         -------
@@ -96,7 +114,8 @@ class Session:
         Raises
         ------
         SessionError
-            ``path`` is a file, already a session, or a non-empty folder.
+            ``path`` is a file, already a session, or a folder holding anything but the empty
+            skeleton an interrupted :meth:`create` leaves (which is completed).
         InputError
             Bad rig name, resolution or metadata.
 
@@ -107,7 +126,7 @@ class Session:
         ...     s = Session.create(Path(d) / "s", rig_name="virtual:cornell",
         ...                        camera_resolution=(4, 6), projector_resolution=(8, 8))
         ...     print(s.camera_resolution, sorted(p.name for p in s.path.iterdir()))
-        (4, 6) ['cache', 'calibration', 'captures', 'manifest.json', 'masks']
+        (4, 6) ['cache', 'calibration', 'captures', 'manifest.json', 'masks', 'session.lock']
         """
         path = Path(path)
         if not isinstance(rig_name, str) or not rig_name:
@@ -117,36 +136,35 @@ class Session:
         metadata = to_json("metadata", {} if metadata is None else metadata)
         if not isinstance(metadata, dict):
             raise InputError(f"metadata must be a dict, got {type(metadata).__name__}")
+        if fingerprint is not None:
+            fingerprint = to_json("fingerprint", fingerprint)
+            try:
+                FINGERPRINT.check(fingerprint, "fingerprint")
+            except Invalid as exc:
+                raise InputError(str(exc)) from None
         if path.exists() or path.is_symlink():
             if not path.is_dir():
                 raise SessionError(f"cannot create a session at {path}: it exists and is not a folder")
             if (path / MANIFEST).exists():
                 raise SessionError(f"{path} is already a session; use Session.open")
-            if any(path.iterdir()):
+            if not is_skeleton(path):
                 raise SessionError(f"cannot create a session in {path}: the folder is not empty")
         try:
             path.mkdir(parents=True, exist_ok=True)
-            for folder in FOLDERS:
-                (path / folder).mkdir(exist_ok=True)
         except OSError as exc:
             raise SessionError(f"cannot create session folder {path}: {exc}") from exc
-        manifest = {
-            "format": FORMAT,
-            "schema_version": SCHEMA_VERSION,
-            "created": now(),
-            "rig": {
-                "name": rig_name,
-                "camera_resolution": list(camera),
-                "projector_resolution": list(projector),
-            },
-            "metadata": metadata,
-            "state": {},
-            "masks": {},
-            "calibration": {"data": {}, "arrays": {}},
-            "captures": [],
-        }
-        session = cls(path, manifest, [], _token=_CONSTRUCT)
-        session._commit(manifest)
+        with _lock.hold(path, "creating the session"):
+            if (path / MANIFEST).exists() or not is_skeleton(path):  # another process was quicker
+                raise SessionError(f"cannot create a session in {path}: another process has just created one there")
+            remove_temporaries(path)
+            try:
+                for folder in FOLDERS:
+                    (path / folder).mkdir(exist_ok=True)
+            except OSError as exc:
+                raise SessionError(f"cannot create session folder {path}: {exc}") from exc
+            session = cls(path, _new_manifest(rig_name, camera, projector, metadata, fingerprint), [],
+                          _token=_CONSTRUCT)
+            session._commit(session._manifest)
         return session
 
     @classmethod
@@ -181,7 +199,17 @@ class Session:
         root = Path(os.path.realpath(path))
         manifest = read_manifest(root, path)
         orphans = check_folder(root, path, manifest, verify=verify)
-        return cls(path, manifest, orphans, _token=_CONSTRUCT)
+        session = cls(path, manifest, orphans, _token=_CONSTRUCT)
+        session.removed = session._remove_temporaries()
+        return session
+
+    def _remove_temporaries(self) -> list[str]:
+        """Delete the temporary files of killed writes, unless another process is writing (its are live)."""
+        try:
+            with _lock.hold(self._root, "removing temporary files", wait=0, idle=True):
+                return remove_temporaries(self.path)
+        except SessionError:  # a writer is at work, or the folder is read-only: leave them
+            return []
 
     # ------------------------------------------------------------------ properties
 
@@ -199,6 +227,11 @@ class Session:
     def projector_resolution(self) -> tuple[int, int]:
         """Projector ``(Hp, Wp)``."""
         return tuple(self._manifest["rig"]["projector_resolution"])
+
+    @property
+    def fingerprint(self) -> dict | None:
+        """What the rig's calibration depends on, as recorded at :meth:`create` (None for older sessions)."""
+        return copy.deepcopy(self._manifest["rig"].get("fingerprint"))
 
     @property
     def metadata(self) -> dict:
@@ -304,7 +337,7 @@ class Session:
             raise InputError(f"meta must be a dict, got {type(meta).__name__}")
         if saturated is not None:
             saturated = check_mask("saturated", saturated, (h, w))
-        with self._lock:
+        with self._writing():
             if self.has_capture(name):
                 raise SessionError(f"session {self.path} already has a capture named {name!r}; "
                                    "captures are written once and never replaced")
@@ -328,7 +361,9 @@ class Session:
                     "it is never overwritten: call recover_orphans() or use another name"
                 ) from None
             except InputError as exc:
-                raise SessionError(f"cannot store capture {name!r}: {exc}") from exc
+                needed = _captures.size_bound(image.shape, saturated is not None)
+                raise self._write_failed(f"capture {name!r}", exc, needed,
+                                         "the captures finished before it are kept") from exc
             new = copy.deepcopy(self._manifest)
             new["captures"].append(entry)
             try:
@@ -378,20 +413,27 @@ class Session:
         """Adopt orphan capture files into the log, using the record each file carries.
 
         An orphan is adopted if it is a readable capture of this session's resolution whose
-        embedded record names it and whose name is not already logged. Others stay in
-        :attr:`orphans` (nothing is ever deleted).
+        embedded record names it and whose name is not already logged. An orphan that cannot
+        be read (a write a full disk truncated) is moved to ``quarantine/`` — listed in
+        :attr:`quarantined` — so the capture of that name is taken again. Other files (another
+        program's images) stay in :attr:`orphans`; nothing is ever deleted.
 
         Returns
         -------
         list of CaptureRecord
             The adopted captures, in their original capture order.
         """
-        with self._lock:
-            found = []
+        with self._writing():
+            found, kept = [], []
             for rel in self._orphans:
-                entry = self._orphan_entry(rel)
+                entry, unreadable = self._inspect_orphan(rel)
                 if entry is not None:
                     found.append((entry.pop("index", 0), rel, entry))
+                elif unreadable is not None:
+                    self._quarantine(rel, unreadable)
+                else:
+                    kept.append(rel)
+            self._orphans = kept
             if not found:
                 return []
             found.sort(key=lambda item: (item[0], item[2]["time"], item[2]["name"]))
@@ -399,25 +441,41 @@ class Session:
             start = len(new["captures"])
             for _, _, entry in found:
                 new["captures"].append(entry)
-            self._commit(new)
-            adopted = {rel for _, rel, _ in found}
-            self._orphans = [rel for rel in self._orphans if rel not in adopted]
+            try:
+                self._commit(new)
+            except SessionError:
+                self._orphans += [rel for _, rel, _ in found]
+                raise
             return [record(e, start + i) for i, (_, _, e) in enumerate(found)]
 
-    def _orphan_entry(self, rel: str) -> dict | None:
+    def _inspect_orphan(self, rel: str) -> tuple[dict | None, str | None]:
         try:
-            entry = _captures.embedded_entry(inside(self._root, self.path, rel, "orphan"), rel, self.camera_resolution)
+            file = inside(self._root, self.path, rel, "orphan")
         except SessionError:
-            return None
+            return None, None  # a symlink leading out: never read, never moved
+        entry, unreadable = _captures.inspect_orphan(file, rel, self.camera_resolution)
         if entry is None or self.has_capture(entry["name"]):
-            return None
+            return None, unreadable
         candidate = copy.deepcopy(self._manifest)
         candidate["captures"].append({k: v for k, v in entry.items() if k != "index"})
         try:
             validate_manifest(candidate)
-        except Invalid:
-            return None
-        return entry
+        except Invalid as exc:
+            return None, f"its record does not fit the manifest ({exc})"
+        return entry, None
+
+    def _quarantine(self, rel: str, why: str) -> None:
+        """Move an unreadable orphan to ``quarantine/`` (never deleted) and remember it in :attr:`quarantined`."""
+        folder = writable(self._root, self.path, "quarantine", folder=True)
+        name = PurePosixPath(rel).name
+        target, n = folder / name, 1
+        while target.exists():
+            target, n = folder / f"{name}.{n}", n + 1
+        try:
+            os.rename(self.path / rel, target)
+        except OSError as exc:
+            raise SessionError(f"cannot move the unreadable {rel} aside into quarantine/: {exc}") from exc
+        self.quarantined.append((rel, target.relative_to(self.path).as_posix(), why))
 
     # ------------------------------------------------------------------ state
 
@@ -445,7 +503,7 @@ class Session:
         if fields.get("order") is not None:
             fields["order"] = check_order(fields["order"])
         values = to_json("state", fields)
-        with self._lock:
+        with self._writing():
             new = copy.deepcopy(self._manifest)
             for key, value in values.items():
                 if value is None:
@@ -475,12 +533,12 @@ class Session:
         check_name("mask", name)
         mask = check_mask("mask", mask, self.camera_resolution)
         rel = f"masks/{name}.png"
-        with self._lock:
+        with self._writing():
             file = writable(self._root, self.path, rel)
             try:
                 imageio.write_image(file, mask.astype(np.uint8) * np.uint8(255))
             except InputError as exc:
-                raise SessionError(f"cannot store mask {name!r}: {exc}") from exc
+                raise self._write_failed(f"mask {name!r}", exc, mask.size, "the session is as it was") from exc
             new = copy.deepcopy(self._manifest)
             new["masks"][name] = {"file": rel, "shape": list(mask.shape)}
             self._commit(new)
@@ -569,14 +627,15 @@ class Session:
                 check_name("calibration array", name)
                 array = _arrays.check_storable(f"calibration array {group}/{name}", array)
                 prepared.append((group, name, array, f"calibration/{group}/{name}{_arrays.suffix_for(array)}"))
-        with self._lock:
+        with self._writing():
             written = {}
             for group, name, array, rel in prepared:
                 folder = writable(self._root, self.path, f"calibration/{group}", folder=True)
                 try:
                     _arrays.write_array(folder / Path(rel).name, array)
                 except (InputError, OSError) as exc:
-                    raise SessionError(f"cannot store calibration array {group}/{name!r}: {exc}") from exc
+                    raise self._write_failed(f"calibration array {group}/{name}", exc, array.nbytes,
+                                             "the captures are kept") from exc
                 written[f"{group}/{name}"] = {"file": rel, "shape": list(array.shape), "dtype": array.dtype.str}
             new = copy.deepcopy(self._manifest)
             before = {e["file"] for e in new["calibration"]["arrays"].values()}
@@ -606,12 +665,13 @@ class Session:
         """
         check_name("cache key", key)
         clean = _cache.check_entry(arrays)
-        with self._lock:
+        with self._writing():
             folder = writable(self._root, self.path, "cache", folder=True)
             try:
                 _cache.write_entry(folder / f"{key}.npz", clean)
             except OSError as exc:
-                raise SessionError(f"cannot write cache entry {key!r}: {exc}") from exc
+                raise self._write_failed(f"cache entry {key!r}", exc, sum(a.nbytes for a in clean.values()),
+                                         "the captures are kept") from exc
 
     def cache_get(self, key: str) -> dict[str, np.ndarray] | None:
         """Return the arrays stored under ``key``, or None if absent.
@@ -640,7 +700,7 @@ class Session:
     def cache_discard(self, key: str) -> None:
         """Delete the cache entry ``key`` if there is one."""
         check_name("cache key", key)
-        with self._lock:
+        with self._writing():
             try:
                 (self.path / "cache" / f"{key}.npz").unlink()
             except FileNotFoundError:
@@ -651,19 +711,94 @@ class Session:
         folder = self.path / "cache"
         if not folder.is_dir() or folder.is_symlink():
             return
-        for child in folder.iterdir():
-            if child.is_file() or child.is_symlink():
-                child.unlink()
-            elif child.is_dir():
-                shutil.rmtree(child)
+        with self._writing():
+            for child in folder.iterdir():
+                if child.is_file() or child.is_symlink():
+                    child.unlink()
+                elif child.is_dir():
+                    shutil.rmtree(child)
 
     # ------------------------------------------------------------------ internals
 
+    @contextmanager
+    def writing(self, purpose: str | None = None) -> Iterator[Session]:
+        """Hold the session's advisory lock for a whole run of writes (e.g. a calibration or a capture).
+
+        Every write takes the lock on its own; holding it across a run keeps other processes
+        from writing in between (a second ``albedit capture`` is refused, naming this one).
+        Re-entrant, and shared by every thread and Session object of this process.
+
+        Parameters
+        ----------
+        purpose : str, optional
+            What is being done, shown to a refused writer (default: the command line).
+
+        Raises
+        ------
+        SessionError
+            Another process holds the lock, or the folder is read-only (see :mod:`engine.session.lock`).
+        """
+        with _lock.hold(self._root, purpose):
+            with self._lock:
+                self._refresh()
+            yield self
+
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        """The lock of one change: held, the manifest re-read if another writer changed it."""
+        with _lock.hold(self._root), self._lock:
+            self._refresh()
+            yield
+
+    def _refresh(self) -> None:
+        """Read the manifest again if it changed on disk since this object last read or wrote it."""
+        signature = _signature(self.path)
+        if signature != self._signature:
+            self._manifest = read_manifest(self._root, self.path)
+            self._signature = signature
+
     def _commit(self, manifest: dict) -> None:
-        """Write ``manifest`` atomically, then make it the in-memory state."""
+        """Write ``manifest`` atomically (read back before it replaces the old one), then make it the state."""
         text = dumps(manifest)
+
+        def verify(temp: Path) -> None:
+            if temp.read_text(encoding="utf-8") != text:
+                raise OSError(errno.EIO, "the manifest written does not read back")
+
         try:
-            imageio.atomic_write(self.path / MANIFEST, lambda temp: temp.write_text(text, encoding="utf-8"))
+            imageio.atomic_write(self.path / MANIFEST, lambda temp: temp.write_text(text, encoding="utf-8"),
+                                 verify=verify)
         except OSError as exc:
-            raise SessionError(f"cannot write {self.path / MANIFEST}: {exc}; the previous manifest is intact") from exc
+            raise self._write_failed(MANIFEST, exc, len(text.encode()),
+                                     "the previous manifest is intact") from exc
         self._manifest = manifest
+        self._signature = _signature(self.path)
+
+    def _write_failed(self, what: str, exc: BaseException, needed: int, kept: str) -> SessionError:
+        """The error of a failed write: a full disk says how much space is needed and that a rerun resumes."""
+        return write_failed(self.path, what, exc, needed, kept)
+
+
+def _signature(path: Path) -> tuple[int, int, int] | None:
+    try:
+        st = os.stat(Path(path) / MANIFEST)
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
+
+
+def _new_manifest(rig_name: str, camera, projector, metadata: dict, fingerprint: dict | None) -> dict:
+    rig = {"name": rig_name, "camera_resolution": list(camera), "projector_resolution": list(projector)}
+    if fingerprint is not None:
+        rig["fingerprint"] = fingerprint
+    return {
+        "format": FORMAT,
+        "schema_version": SCHEMA_VERSION,
+        "created": now(),
+        "rig": rig,
+        "metadata": metadata,
+        "state": {},
+        "masks": {},
+        "calibration": {"data": {}, "arrays": {}},
+        "captures": [],
+    }

@@ -11,13 +11,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from engine.errors import SessionError
+from engine.imageio import is_temp_name
 from engine.session import captures as _captures
 from engine.session.jsonio import loads
+from engine.session.lock import LOCK_FILE
 from engine.session.paths import FOLDERS, MANIFEST, inside
 from engine.session.schema import validate_manifest
 from engine.session.spec import Invalid
 
-__all__ = ["MAX_MANIFEST_BYTES", "check_folder", "read_manifest"]
+__all__ = ["MAX_MANIFEST_BYTES", "check_folder", "is_skeleton", "read_manifest", "remove_temporaries"]
 
 MAX_MANIFEST_BYTES = 64 * 1024 * 1024
 
@@ -93,3 +95,46 @@ def check_folder(root: Path, path: Path, manifest: dict, *, verify: bool) -> lis
 def _expect(where: str, rel: str, *allowed: str) -> None:
     if rel not in allowed:
         raise SessionError(f"{where}: its file must be {' or '.join(map(repr, allowed))}, the manifest says {rel!r}")
+
+
+def is_skeleton(path: Path) -> bool:
+    """Whether ``path`` holds nothing but what an interrupted :meth:`Session.create` leaves.
+
+    That is: empty sub-folders of a session, its lock file and temporary files of a manifest
+    write that never finished. Anything else (a photograph, a capture, another program's
+    files) makes it a folder that is not ours to fill.
+    """
+    for child in path.iterdir():
+        if child.is_symlink():
+            return False
+        if child.name in FOLDERS and child.is_dir():
+            if any(child.iterdir()):
+                return False
+        elif not (child.is_file() and (child.name == LOCK_FILE or is_temp_name(child.name))):
+            return False
+    return True
+
+
+def remove_temporaries(path: Path) -> list[str]:
+    """Delete the temporary files killed writes left in the session folder; returns their relative paths.
+
+    Only names :func:`engine.imageio.atomic_write` gives its temporary files are touched, in
+    the folder, its sub-folders and the calibration groups (never through a symlink). Call it
+    with the session's lock held, so no live write's temporary file is taken.
+    """
+    folders = [path] + [path / f for f in FOLDERS]
+    calibration = path / "calibration"
+    if calibration.is_dir() and not calibration.is_symlink():
+        folders += [g for g in calibration.iterdir() if g.is_dir() and not g.is_symlink()]
+    removed = []
+    for folder in folders:
+        if not folder.is_dir() or folder.is_symlink():
+            continue
+        for child in folder.iterdir():
+            if is_temp_name(child.name) and child.is_file() and not child.is_symlink():
+                try:
+                    child.unlink()
+                except OSError:
+                    continue
+                removed.append(child.relative_to(path).as_posix())
+    return sorted(removed)

@@ -32,7 +32,7 @@ from engine.session.spec import (
     join,
 )
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "STATE", "validate_manifest", "validate_state"]
+__all__ = ["FINGERPRINT", "FORMAT", "SCHEMA_VERSION", "STATE", "validate_manifest", "validate_state"]
 
 FORMAT = "albedit-session"
 #: The manifest schema this version writes and reads. Newer manifests are refused.
@@ -123,6 +123,11 @@ STATE = Obj(
     extra=ANY,
 )
 
+#: What a rig's calibration depends on (:attr:`engine.rig.RigLike.fingerprint`): named plain values.
+_PLAIN = OneOf(Str(max_len=1024), Num(), Bool(), expected="a string, number or boolean")
+FINGERPRINT = Map(Str(min_len=1, max_len=64), OneOf(_PLAIN, List(_PLAIN, max_len=64),
+                                                   expected="a string, number, boolean or a list of them"))
+
 _MASK = Obj(required={"file": Str(min_len=1), "shape": _RESOLUTION})
 _ARRAY_KEY = Str(pattern=f"{NAME.pattern}/{NAME.pattern}", expected="'group/name'")
 _ARRAY = Obj(required={"file": Str(min_len=1), "shape": List(Int(0)), "dtype": _DTYPE})
@@ -132,7 +137,7 @@ MANIFEST = Obj(required={
     "schema_version": Int(),
     "created": Str(max_len=64),
     "rig": Obj(required={"name": Str(min_len=1, max_len=1024), "camera_resolution": _RESOLUTION,
-                         "projector_resolution": _RESOLUTION}),
+                         "projector_resolution": _RESOLUTION}, optional={"fingerprint": FINGERPRINT}),
     "metadata": Obj(extra=ANY),
     "state": STATE,
     "masks": Map(NAME_SPEC, _MASK),

@@ -21,6 +21,7 @@ rather than repeating their checks:
 from engine.workflow.calibration import (
     adopt_calibration,
     calibration_problems,
+    check_rig,
     load_calibration,
     load_compatible_calibration,
     open_session_for_rig,
@@ -49,10 +50,9 @@ from engine.workflow.decomposition import (
 from engine.workflow.edit import edit_from_plan, save_edit, saved_edit
 
 __all__ = [
-    "MAX_FRAMES", "CaptureResult", "Preflight", "Unreachable", "adopt_calibration", "calibration_problems",
-    "cached_decomposition", "capture_plan", "check_frames", "check_targets", "decomposition_key", "denoised_key",
-    "edit_from_plan",
-    "estimated_report", "load_calibration", "load_compatible_calibration", "load_decomposition",
-    "open_session_for_rig", "photograph_name", "preflight", "run_calibration", "run_capture", "save_calibration",
-    "save_edit", "saved_edit",
+    "MAX_FRAMES", "CaptureResult", "Preflight", "Unreachable", "adopt_calibration", "cached_decomposition",
+    "calibration_problems", "capture_plan", "check_frames", "check_rig", "check_targets", "decomposition_key",
+    "denoised_key", "edit_from_plan", "estimated_report", "load_calibration", "load_compatible_calibration",
+    "load_decomposition", "open_session_for_rig", "photograph_name", "preflight", "run_calibration", "run_capture",
+    "save_calibration", "save_edit", "saved_edit",
 ]

@@ -6,13 +6,13 @@ from pathlib import Path
 
 from engine.acquire import Recorder, calibrate_rig
 from engine.calibrate import Calibration
-from engine.calibrate.response import ramp_levels
 from engine.errors import InputError, SessionError
 from engine.progress import Progress, ShouldStop
+from engine.rig import fingerprint_differences, fingerprint_of
 from engine.session import Session
 
 __all__ = [
-    "adopt_calibration", "calibration_problems", "load_calibration", "load_compatible_calibration",
+    "adopt_calibration", "calibration_problems", "check_rig", "load_calibration", "load_compatible_calibration",
     "open_session_for_rig", "run_calibration", "save_calibration",
 ]
 
@@ -38,6 +38,11 @@ def open_session_for_rig(path, rig) -> Session:
                 f"session {path} belongs to rig {theirs[0]!r} (camera {theirs[1]}, projector {theirs[2]}), "
                 f"not to {ours[0]!r} (camera {ours[1]}, projector {ours[2]}); choose a new session folder"
             )
+        recorded = session.fingerprint
+        differences = [] if recorded is None else fingerprint_differences(recorded, fingerprint_of(rig))
+        if differences:
+            raise SessionError(f"session {path} was recorded with another set-up of rig {rig.identity!r}: "
+                               f"{'; '.join(differences)}; choose a new session folder")
         return session
     return Session.create(
         path,
@@ -45,6 +50,7 @@ def open_session_for_rig(path, rig) -> Session:
         camera_resolution=tuple(rig.camera.resolution),
         projector_resolution=tuple(rig.projector.resolution),
         metadata={"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8))},
+        fingerprint=fingerprint_of(rig),
     )
 
 
@@ -80,11 +86,17 @@ def load_compatible_calibration(source, rig) -> Calibration:
     SessionError
         ``source`` is not a calibrated session.
     InputError
-        The calibration was made for another rig or resolution (the message says which).
+        The calibration was made for another rig, resolution or set-up (the message says what differs).
     """
     calibration = load_calibration(Session.open(source))
-    calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+    check_rig(calibration, rig)
     return calibration
+
+
+def check_rig(calibration: Calibration, rig) -> None:
+    """InputError unless ``calibration`` was made with ``rig`` as it is set up now (name, resolutions, fingerprint)."""
+    calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution),
+                                 fingerprint_of(rig))
 
 
 def adopt_calibration(session: Session, calibration: Calibration) -> None:
@@ -113,9 +125,13 @@ def run_calibration(
 ) -> Calibration:
     """Calibrate ``rig`` into ``session`` (resumable); see :func:`engine.acquire.calibrate_rig`.
 
-    ``levels`` is checked before the first capture.
+    The session's lock is held throughout: another process cannot write the session meanwhile.
     """
-    ramp_levels(levels, bit_depth=int(getattr(rig.projector, "bit_depth", 8)))
+    with session.writing("calibrating the rig"):
+        return _calibrate(rig, session, levels=levels, crosstalk=crosstalk, progress=progress, should_stop=should_stop)
+
+
+def _calibrate(rig, session: Session, *, levels, crosstalk, progress, should_stop) -> Calibration:
     recorder = Recorder(rig, session, progress=progress, should_stop=should_stop)
     calibration = calibrate_rig(recorder, rig_name=session.rig_name, levels=levels, crosstalk=crosstalk)
     save_calibration(session, calibration)

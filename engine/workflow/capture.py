@@ -17,7 +17,7 @@ from engine.figurate import MAX_ORDER
 from engine.progress import Progress, ShouldStop
 from engine.session import Session
 from engine.session.edit import check_target_name, mask_digest, mask_name
-from engine.workflow.calibration import load_calibration
+from engine.workflow.calibration import check_rig, load_calibration
 from engine.workflow.decomposition import decomposition_key
 
 __all__ = [
@@ -167,7 +167,7 @@ def preflight(
     """
     unreachable = Unreachable(unreachable)
     calibration = load_calibration(session)
-    calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+    check_rig(calibration, rig)
     targets = [(str(name), mask) for name, mask in targets]
     check_targets(targets, calibration.camera_resolution)
     targets = [(name, np.asarray(mask, bool)) for name, mask in targets]
@@ -259,6 +259,14 @@ def run_capture(
         The :class:`engine.acquire.CascadeResult` with the decomposition and its cache key.
     """
     settings = settings or CaptureSettings()
+    with session.writing("capturing"):
+        return _capture(rig, session, targets, order, fixed_kappa=fixed_kappa, settings=settings, adaptive=adaptive,
+                        photograph_pattern=photograph_pattern, frames=frames, unreachable=unreachable,
+                        progress=progress, should_stop=should_stop, on_capture=on_capture)
+
+
+def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, adaptive, photograph_pattern, frames,
+             unreachable, progress, should_stop, on_capture) -> CaptureResult:
     checked = preflight(rig, session, targets, order, fixed_kappa=fixed_kappa, settings=settings, adaptive=adaptive,
                         photograph_pattern=photograph_pattern, frames=frames, unreachable=unreachable)
     targets, plan = checked.targets, checked.plan
