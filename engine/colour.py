@@ -27,12 +27,12 @@ from engine.errors import InputError
 
 __all__ = [
     "Convergence",
-    "LUMINANCE",
     "convergence",
     "direct_colour",
     "kappa_for_albedo",
     "kappa_for_colour",
     "kappa_limit",
+    "luminance_weights",
     "parse_colour",
     "to_hex",
     "to_lab",
@@ -69,8 +69,15 @@ def _srgb_to_xyz() -> np.ndarray:
     return np.asarray(colour_science().RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ, np.float64)
 
 
-#: Rec. 709 / sRGB luminance weights of linear R, G, B (the Y row of that matrix).
-LUMINANCE = _srgb_to_xyz()[1]
+def luminance_weights() -> np.ndarray:
+    """(3,) Rec. 709 / sRGB luminance weights of linear R, G, B (the Y row of that matrix).
+
+    Examples
+    --------
+    >>> np.round(luminance_weights(), 4).tolist()
+    [0.2126, 0.7152, 0.0722]
+    """
+    return _srgb_to_xyz()[1].copy()
 
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _TRIPLE = re.compile(rf"^\s*({_NUMBER})\s*[, ]\s*({_NUMBER})\s*[, ]\s*({_NUMBER})\s*$")
@@ -238,7 +245,7 @@ def direct_colour(decomposition: Decomposition, *, direct=None) -> np.ndarray:
     if decomposition.shape[2] != 3:
         raise InputError(f"a colour needs 3 channels, the decomposition has {decomposition.shape[2]}")
     seen = decomposition.components[0][target].astype(np.float64).mean(axis=0)
-    if float(seen @ LUMINANCE) <= 0:
+    if float(seen @ luminance_weights()) <= 0:
         raise InputError("the target reflects no light in the photograph: its colour cannot be measured")
     if direct is None:
         return seen
@@ -249,7 +256,7 @@ def direct_colour(decomposition: Decomposition, *, direct=None) -> np.ndarray:
     if not lit.any():
         raise InputError("the direct image D is zero on the whole target: measure it (Nayar patterns) first")
     balanced = d[lit].astype(np.float64).mean(axis=0)
-    return balanced * float(seen @ LUMINANCE) / float(balanced @ LUMINANCE)
+    return balanced * float(seen @ luminance_weights()) / float(balanced @ luminance_weights())
 
 
 def kappa_for_colour(current, wanted, *, keep_luminance: bool = False) -> np.ndarray:
@@ -285,7 +292,7 @@ def kappa_for_colour(current, wanted, *, keep_luminance: bool = False) -> np.nda
     >>> kappa_for_colour([0.1, 0.8, 0.1], [0.2, 0.1, 0.8]).tolist()
     [2.0, 0.125, 8.0]
     >>> k = kappa_for_colour([0.5, 0.5, 0.5], [1.0, 0.0, 0.0], keep_luminance=True)
-    >>> round(float(k @ LUMINANCE * 0.5), 6) == round(0.5 * float(LUMINANCE.sum()), 6)
+    >>> round(float(k @ luminance_weights() * 0.5), 6) == round(0.5 * float(luminance_weights().sum()), 6)
     True
     """
     cur = _colour3("current", current)
@@ -294,10 +301,10 @@ def kappa_for_colour(current, wanted, *, keep_luminance: bool = False) -> np.nda
         raise InputError(f"the target's current colour {cur.tolist()} has a black channel: no κ can make light there")
     kappa = want / cur
     if keep_luminance:
-        new = float((kappa * cur) @ LUMINANCE)
+        new = float((kappa * cur) @ luminance_weights())
         if new <= 0:
             raise InputError("a black colour has no hue to keep the luminance with; switch 'keep luminance' off")
-        kappa *= float(cur @ LUMINANCE) / new
+        kappa *= float(cur @ luminance_weights()) / new
     return kappa
 
 
