@@ -9,7 +9,7 @@ the direct components of two papers).
 
 Colours are linear RGB in the photograph's units unless said otherwise. Display colours
 (hex, sRGB, CIE Lab) are decoded with colour-science to linear values that show as that
-colour at display exposure 0; pass ``exposure`` to match a brighter or darker display.
+colour at display exposure 0 (the ``to_*`` functions take the display's ``exposure``).
 """
 
 from __future__ import annotations
