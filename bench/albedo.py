@@ -74,11 +74,13 @@ def cornell(work: Path, options: dict, frames: int) -> None:
         print(f"  wall colour, chromaticity error vs its albedo {np.round(truth.astype(float), 3).tolist()}:")
         print(f"    photograph mean (interreflections in)  {_fmt(_chroma_error(seen, truth))}")
         print(f"    direct colour R^0 L_d                  {_fmt(_chroma_error(direct_colour(d), truth))}")
-        print(f"    R^0 L_d white-balanced by D            {_fmt(_chroma_error(direct_colour(d, direct=prepared.direct), truth))}")
+        balanced = direct_colour(d, direct=prepared.direct)
+        print(f"    R^0 L_d white-balanced by D            {_fmt(_chroma_error(balanced, truth))}")
         albedo = scale.albedo(prepared.direct, prepared.mask)
         kappa = kappa_for_albedo(albedo, [0.2, 0.1, 0.8])
         print(f"  albedo against a card over the wall      {_fmt(100 * (albedo / truth - 1))}")
-        print(f"  κ for (0.2, 0.1, 0.8): {np.round(kappa, 4).tolist()}, vs (2, 0.125, 8) {_fmt(100 * (kappa / KAPPA - 1))}")
+        print(f"  κ for (0.2, 0.1, 0.8): {np.round(kappa, 4).tolist()}, "
+              f"vs (2, 0.125, 8) {_fmt(100 * (kappa / KAPPA - 1))}")
 
 
 def checker(work: Path, options: dict, frames: int) -> None:
@@ -96,14 +98,16 @@ def checker(work: Path, options: dict, frames: int) -> None:
             mask = rig.targets[name]
             p = prepare_target(recorder, calibration, mask, photo, name=name)
             albedo, true = chart.scale.albedo(p.direct, p.mask), truth[mask].mean(axis=0)
-            print(f"  {name:10s} absolute albedo {np.round(albedo, 4).tolist()} vs {np.round(true.astype(float), 4).tolist()}: "
+            print(f"  {name:10s} absolute albedo {np.round(albedo, 4).tolist()} "
+                  f"vs {np.round(true.astype(float), 4).tolist()}: "
                   f"{_fmt(100 * (albedo / true - 1))}")
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--resolution", type=int, default=96, help="camera and projector side (default %(default)s)")
-    parser.add_argument("--frames", type=int, default=16, help="frames averaged on the realistic rig (default %(default)s)")
+    parser.add_argument("--frames", type=int, default=16,
+                        help="frames averaged on the realistic rig (default %(default)s)")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         for ideal in (True, False):

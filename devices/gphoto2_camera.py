@@ -24,10 +24,11 @@ from pathlib import PurePosixPath
 
 import numpy as np
 
-from devices._common import DeviceTimeout, Watchdog, assemble_rig, call_with_timeout, check_positive
+from devices._common import DeviceTimeout, Watchdog, assemble_rig, call_with_timeout
 from devices._linearize import RAW_EXTENSIONS, decode_raw, merge_exposures
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
 __all__ = ["GPhoto2Camera", "list_cameras", "open_camera", "open_rig", "parse_shutter", "probe"]

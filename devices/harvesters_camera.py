@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from devices._common import Watchdog, assemble_rig, check_positive
+from devices._common import Watchdog, assemble_rig
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
 __all__ = ["HarvestersCamera", "open_camera", "open_rig", "probe"]

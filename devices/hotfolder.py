@@ -18,15 +18,16 @@ import os
 import subprocess
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from devices._common import assemble_rig, check_positive
+from devices._common import assemble_rig
 from devices._linearize import RAW_EXTENSIONS, decode_raw
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
 __all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_camera", "open_rig", "probe"]

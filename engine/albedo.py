@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_float_image, check_mask
+from engine.checks import check_float_image, check_mask
 from engine.errors import InputError
 
 __all__ = ["AlbedoScale", "fit_albedo_scale", "reference_scale"]
@@ -97,7 +97,8 @@ class AlbedoScale:
                 raise InputError(f"the reference covers a {self.valid.shape} image, the target is {t.shape}")
             use &= self.valid
         if not use.any():
-            raise InputError("no target pixel has a measured D" + (" under the reference card" if self.valid is not None else ""))
+            where = " under the reference card" if self.valid is not None else ""
+            raise InputError(f"no target pixel has a measured D{where}")
         if self.scale.ndim == 1:
             return d[use].astype(np.float64).mean(axis=0) / self.scale
         return (d[use].astype(np.float64) / self.scale[use]).mean(axis=0)

@@ -19,7 +19,7 @@ from functools import cache
 
 import numpy as np
 
-from engine._checks import check_float_image, check_mask
+from engine.checks import check_float_image, check_mask
 from engine.colour import colour_science
 from engine.errors import InputError
 

@@ -21,7 +21,7 @@ from functools import cache
 
 import numpy as np
 
-from engine._checks import check_float_image, check_kappa
+from engine.checks import check_float_image, check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
 
@@ -132,7 +132,8 @@ def parse_colour(text: str) -> np.ndarray:
     values = np.array([float(v) for v in match.groups()], np.float64)
     if space == "srgb":
         if np.any(values < 0) or np.any(values > 1):
-            raise InputError(f"sRGB values are 0–1, got {values.tolist()} in {text!r}; for 0–255 write hex, e.g. '#3355cc'")
+            raise InputError(f"sRGB values are 0–1, got {values.tolist()} in {text!r}; "
+                             "for 0–255 write hex, e.g. '#3355cc'")
         return _decode_srgb(values)
     if space == "lab":
         return _lab_to_linear(values, text)
@@ -153,7 +154,8 @@ def _lab_to_linear(lab: np.ndarray, text: str) -> np.ndarray:
     xyz = np.asarray(colour.Lab_to_XYZ(lab, _white_xy()), np.float64)
     rgb = np.linalg.solve(_srgb_to_xyz(), xyz)
     if np.any(rgb < -1e-6):
-        raise InputError(f"the Lab colour {lab.tolist()} lies outside the sRGB gamut (linear RGB {np.round(rgb, 4).tolist()}); "
+        raise InputError(f"the Lab colour {lab.tolist()} lies outside the sRGB gamut "
+                         f"(linear RGB {np.round(rgb, 4).tolist()}); "
                          "choose a less saturated colour")
     return np.maximum(rgb, 0.0)
 
@@ -338,11 +340,13 @@ def kappa_for_albedo(current_albedo, wanted_albedo) -> np.ndarray:
     want = _colour3("wanted_albedo", wanted_albedo)
     over = [f"{'RGB'[c]} = {want[c]:g}" for c in range(3) if want[c] >= 1]
     if over:
-        raise InputError(f"an albedo of 1 or more ({', '.join(over)}) is impossible: a surface cannot reflect more light "
+        raise InputError(f"an albedo of 1 or more ({', '.join(over)}) is impossible: "
+                         "a surface cannot reflect more light "
                          "than it receives (the interreflection series would diverge); ask for less than 1")
     if np.any(cur <= 0) or np.any(cur >= 1):
         raise InputError(f"the target's measured albedo {np.round(cur, 4).tolist()} is not in (0, 1): the reference "
-                         "(colour checker) was not lit like the target; measure it beside the target, facing the same way")
+                         "(colour checker) was not lit like the target; "
+                         "measure it beside the target, facing the same way")
     return want / cur
 
 
@@ -410,8 +414,9 @@ class Convergence:
         if self.ratio[c] >= 1:
             return (f"κ diverges in {channel}: the target would reflect more light than it receives round its "
                     f"interreflections (κ is {self.ratio[c]:.2f}× the limit); ask for a smaller change")
-        return (f"the recolor has not converged at order {self.order}: the last interaction is {self.share[c]:.1%} of the "
-                f"target's light in {channel} (above {self.threshold:.0%}); capture a higher order or ask for a smaller change")
+        return (f"the recolor has not converged at order {self.order}: the last interaction is "
+                f"{self.share[c]:.1%} of the target's light in {channel} (above {self.threshold:.0%}); "
+                "capture a higher order or ask for a smaller change")
 
 
 def convergence(decomposition: Decomposition, kappa, *, threshold: float = CONVERGENCE_THRESHOLD) -> Convergence:

@@ -39,10 +39,12 @@ def checker_scene() -> dict:
         {"name": "back_wall", "corners": _front_facing(0, 0, 1, 1, 1.0), "albedo": grey},
         {"name": "left_wall", "corners": [[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]], "albedo": [0.6, 0.22, 0.15]},
         {"name": "right_wall", "corners": [[1, 0, 0], [1, 0, 1], [1, 1, 1], [1, 1, 0]], "albedo": [0.15, 0.25, 0.6]},
-        {"name": "ceiling_light", "corners": [[0.35, 0.998, 0.2], [0.65, 0.998, 0.2], [0.65, 0.998, 0.5], [0.35, 0.998, 0.5]],
+        {"name": "ceiling_light",
+         "corners": [[0.35, 0.998, 0.2], [0.65, 0.998, 0.2], [0.65, 0.998, 0.5], [0.35, 0.998, 0.5]],
          "albedo": [0.5, 0.5, 0.5], "emission": [15.0, 14.0, 12.0]},
         {"name": "chart_card", "albedo": [0.03, 0.03, 0.03],
-         "corners": _front_facing(CHART_X0 - 0.02, CHART_TOP - 4 * PITCH - 0.01, CHART_X0 + COLUMNS * PITCH - 0.0, CHART_TOP + 0.02, 0.9995)},
+         "corners": _front_facing(CHART_X0 - 0.02, CHART_TOP - 4 * PITCH - 0.01,
+                                  CHART_X0 + COLUMNS * PITCH, CHART_TOP + 0.02, 0.9995)},
         {"name": "panel", "corners": _front_facing(*PANEL, 0.999), "albedo": PANEL_ALBEDO},
     ]
     gap = (PITCH - SWATCH) / 2
@@ -50,7 +52,8 @@ def checker_scene() -> dict:
         r, c = divmod(i, COLUMNS)
         x0 = CHART_X0 + c * PITCH + gap
         y1 = CHART_TOP - r * PITCH - gap
-        surfaces.append({"name": f"patch_{i + 1:02d}", "corners": _front_facing(x0, y1 - SWATCH, x0 + SWATCH, y1, 0.999),
+        surfaces.append({"name": f"patch_{i + 1:02d}",
+                         "corners": _front_facing(x0, y1 - SWATCH, x0 + SWATCH, y1, 0.999),
                          "albedo": [float(v) for v in rho[i]]})
     return {
         "name": "checker",

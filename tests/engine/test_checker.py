@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from engine.albedo import AlbedoScale, fit_albedo_scale, reference_scale
-from engine.checker import Checker, checker_from_corners, detect_checker, patch_names, reference_reflectances, sample_patches
+from engine.checker import (
+    Checker,
+    checker_from_corners,
+    detect_checker,
+    patch_names,
+    reference_reflectances,
+    sample_patches,
+)
 from engine.errors import InputError
 
 SHAPE = (160, 240)
