@@ -25,7 +25,7 @@ import time
 from typing import Callable, NamedTuple
 
 import numpy as np
-from PySide6.QtCore import QCoreApplication, QEventLoop, QPoint, QRect, Qt, QThread, Signal, Slot
+from PySide6.QtCore import QCoreApplication, QEventLoop, QPoint, QRect, Qt, QThread, QTimer, Signal, Slot
 from PySide6.QtGui import QColor, QFont, QGuiApplication, QImage, QPainter
 from PySide6.QtWidgets import QApplication, QWidget
 
@@ -35,11 +35,11 @@ from engine.errors import DeviceError, InputError
 __all__ = [
     "QtScreenProjector",
     "ScreenInfo",
+    "default_problem",
     "identify_pattern",
     "list_screens",
     "open_projector",
     "probe",
-    "projector_from_spec",
 ]
 
 
@@ -199,6 +199,7 @@ class _ProjectorWindow(QWidget):
 
     present_requested = Signal()
     close_requested = Signal()
+    grab_requested = Signal()
 
     def __init__(self) -> None:
         flags = Qt.WindowType.Window | Qt.WindowType.FramelessWindowHint | Qt.WindowType.WindowStaysOnTopHint
@@ -212,8 +213,17 @@ class _ProjectorWindow(QWidget):
         self._lock = threading.Lock()
         self._pending: tuple[int, QImage, threading.Event] | None = None
         self._deferred: tuple[int, threading.Event] | None = None
+        self._grabs: list[tuple[Callable[[], np.ndarray], dict, threading.Event]] = []
+        self.closing = False  # set by the projector before it closes the window itself
+        self.on_closed: Callable[[], None] | None = None
         self.present_requested.connect(self._present_pending, Qt.ConnectionType.QueuedConnection)
         self.close_requested.connect(self._close_now, Qt.ConnectionType.QueuedConnection)
+        self.grab_requested.connect(self._grab_pending, Qt.ConnectionType.QueuedConnection)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        if not self.closing and self.on_closed is not None:
+            self.on_closed()  # closed by the user or the window manager, not by the projector
+        super().closeEvent(event)
 
     def paintEvent(self, event) -> None:  # noqa: N802 (Qt name)
         painter = QPainter(self)
@@ -243,14 +253,33 @@ class _ProjectorWindow(QWidget):
             self._pending = (serial, image, done)
         self.present_requested.emit()
 
+    def request_grab(self, grab: Callable[[], np.ndarray], box: dict, done: threading.Event) -> None:
+        """From a worker thread: run ``grab()`` on the UI thread, its result or error into ``box``."""
+        with self._lock:
+            self._grabs.append((grab, box, done))
+        self.grab_requested.emit()
+
     def wake_waiters(self) -> None:
-        """Release any show() waiting for a paint (its caller then checks why)."""
+        """Release any show() or grab waiting for the UI thread (its caller then checks why)."""
         with self._lock:
             pending, self._pending = self._pending, None
+            grabs, self._grabs = self._grabs, []
         deferred, self._deferred = self._deferred, None
-        for item in (pending, deferred):
+        for item in (pending, deferred, *grabs):
             if item is not None:
                 item[-1].set()
+
+    @Slot()
+    def _grab_pending(self) -> None:
+        with self._lock:
+            grabs, self._grabs = self._grabs, []
+        for grab, box, done in grabs:
+            try:
+                box["value"] = grab()
+            except Exception as exc:  # noqa: BLE001 - handed to the waiting thread, never out of the slot
+                box["error"] = exc
+            finally:
+                done.set()
 
     @Slot()
     def _present_pending(self) -> None:
@@ -261,6 +290,7 @@ class _ProjectorWindow(QWidget):
 
     @Slot()
     def _close_now(self) -> None:
+        self.closing = True
         self.close()
         self.deleteLater()
 
@@ -278,7 +308,7 @@ class QtScreenProjector:
     timeout : float
         Seconds to wait for the UI thread to paint a frame before raising DeviceError.
     sleep : callable, optional
-        ``sleep(seconds)`` used for the settle wait (default ``time.sleep``; tests record it).
+        ``sleep(seconds)`` used for the settle wait (default :meth:`idle`; tests record it).
 
     Attributes
     ----------
@@ -311,7 +341,8 @@ class QtScreenProjector:
         self.screen_name = qscreen.name()
         self.resolution = _device_size(qscreen)
         self.settle, self.timeout = settle, timeout
-        self._sleep = time.sleep if sleep is None else sleep
+        self._sleep = self.idle if sleep is None else sleep
+        self._qscreen = qscreen
         self._dpr = float(qscreen.devicePixelRatio())
         self._lost: str | None = None
         self._callbacks: list[Callable[[], None]] = []
@@ -320,6 +351,7 @@ class QtScreenProjector:
         self.last_shown: np.ndarray | None = None
         self.closed = False
         self.window = _ProjectorWindow()
+        self.window.on_closed = self._on_window_closed
         self.window.setScreen(qscreen)  # right before showFullScreen: Wayland ignores later moves
         self.window.setGeometry(qscreen.geometry())
         self.window.showFullScreen()
@@ -334,6 +366,37 @@ class QtScreenProjector:
                 "reconnect the projector and open the rig again"
             )
             self.window.wake_waiters()  # a show() waiting for a paint fails now, not at its timeout
+
+    def _on_window_closed(self) -> None:
+        self._lost = (
+            f"the projector window on {self.screen_name!r} was closed (by the user or the window manager) "
+            "while the rig was open; open the rig again (captures taken so far are kept)"
+        )
+        self.window.wake_waiters()
+
+    def idle(self, seconds: float) -> None:
+        """Wait ``seconds``; on the UI thread, keep processing its events meanwhile.
+
+        A projector window whose thread sleeps cannot repaint and is reported "not responding"
+        by desktop shells after a few seconds; cameras that wait on the UI thread (a hot
+        folder polled by the command line) wait through this instead (see
+        :func:`devices.registry.pair`).
+        """
+        seconds = float(seconds)
+        if seconds <= 0:
+            return
+        if not _on_ui_thread():
+            time.sleep(seconds)
+            return
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            loop, timer = QEventLoop(), QTimer()
+            timer.setSingleShot(True)
+            timer.setTimerType(Qt.TimerType.PreciseTimer)
+            timer.timeout.connect(loop.quit)
+            timer.start(max(1, int(np.ceil(left * 1000))))
+            loop.exec()
+            timer.stop()
 
     def add_shown_callback(self, callback: Callable[[], None]) -> None:
         """Call ``callback()`` after each new frame is painted (before the settle wait).
@@ -420,16 +483,56 @@ class QtScreenProjector:
         self.show(identify_pattern(self.resolution, label=f"{self.screen_name}  {wp}x{hp}"))
 
     def grab(self) -> np.ndarray:
-        """What the window shows now, as (Hp, Wp, 3) uint8 (UI thread only; for checks and tests)."""
+        """What the window paints now, as (Hp, Wp, 3) uint8 (UI thread only; for checks and tests)."""
         if not _on_ui_thread():
             raise DeviceError("grab() must be called on the Qt UI thread")
         return _rgb_array(self.window.grab().toImage())
+
+    def grab_screen(self) -> np.ndarray:
+        """What the projector's whole screen displays now, as (Hp, Wp, 3) uint8; from any thread.
+
+        This is what a camera looking at the screen sees: every window on it, composited by
+        the platform, in device pixels. From a worker thread the grab runs on the UI thread
+        (whose event loop must be running, or which must be waiting in :meth:`idle`).
+
+        Raises
+        ------
+        DeviceError
+            The screen was disconnected, the UI thread did not answer within ``timeout``, or
+            the platform's screen grab is not in device pixels (Qt's offscreen platform at a
+            device-pixel ratio other than 1 returns a wrong picture).
+        """
+        if self._lost:
+            raise DeviceError(self._lost)
+        if _on_ui_thread():
+            return self._grab_screen_now()
+        box: dict = {}
+        done = threading.Event()
+        self.window.request_grab(self._grab_screen_now, box, done)
+        if not done.wait(self.timeout):
+            raise DeviceError(f"the UI thread did not grab screen {self.screen_name!r} within {self.timeout:g} s; is its event loop blocked?")
+        if self._lost:
+            raise DeviceError(self._lost)
+        if "error" in box:
+            raise box["error"]
+        return box["value"]
+
+    def _grab_screen_now(self) -> np.ndarray:
+        pixmap = self._qscreen.grabWindow(0)
+        image = _rgb_array(pixmap.toImage())
+        if image.shape[:2] != tuple(self.resolution) or pixmap.devicePixelRatio() != 1.0:
+            raise DeviceError(
+                f"the screen grab of {self.screen_name!r} is {image.shape[1]}x{image.shape[0]} at device-pixel ratio "
+                f"{pixmap.devicePixelRatio():g}, not the screen's {self.resolution[1]}x{self.resolution[0]} device pixels"
+            )
+        return image
 
     def close(self) -> None:
         """Close the window. Idempotent; safe from any thread."""
         if self.closed:
             return
         self.closed = True
+        self.window.closing = True
         app = QCoreApplication.instance()
         if app is not None:
             try:
@@ -477,26 +580,8 @@ def open_projector(screen: int | str | None = None, *, settle: float = 0.1, time
     return QtScreenProjector(screen, settle=settle, timeout=timeout, sleep=sleep)
 
 
-def projector_from_spec(spec: str | None, **options) -> QtScreenProjector:
-    """Open the projector a rig option names: ``None``/``"qtscreen"`` (second screen) or ``"qtscreen:X"``.
-
-    Examples
-    --------
-    >>> projector_from_spec("vga:1")
-    Traceback (most recent call last):
-    ...
-    engine.errors.InputError: projector must be 'qtscreen:NAME_OR_INDEX' (or None for the second screen), got 'vga:1'
-    """
-    if spec is None:
-        return open_projector(None, **options)
-    kind, _, arg = str(spec).partition(":")
-    if kind != "qtscreen":
-        raise InputError(f"projector must be 'qtscreen:NAME_OR_INDEX' (or None for the second screen), got {spec!r}")
-    return open_projector(arg if arg else None, **options)
-
-
-def second_screen_problem() -> str:
-    """Why the default projector (second screen) cannot open here, or ``""`` if it can."""
+def default_problem() -> str:
+    """Why the default projector (a window on the second screen) cannot open here, or ``""`` if it can."""
     try:
         _application()
     except DeviceError as exc:
