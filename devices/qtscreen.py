@@ -199,7 +199,7 @@ class _ProjectorWindow(QWidget):
 
     present_requested = Signal()
     close_requested = Signal()
-    grab_requested = Signal()
+    call_requested = Signal()
 
     def __init__(self) -> None:
         flags = Qt.WindowType.Window | Qt.WindowType.FramelessWindowHint | Qt.WindowType.WindowStaysOnTopHint
@@ -213,12 +213,12 @@ class _ProjectorWindow(QWidget):
         self._lock = threading.Lock()
         self._pending: tuple[int, QImage, threading.Event] | None = None
         self._deferred: tuple[int, threading.Event] | None = None
-        self._grabs: list[tuple[Callable[[], np.ndarray], dict, threading.Event]] = []
+        self._calls: list[tuple[Callable[[], object], dict, threading.Event]] = []
         self.closing = False  # set by the projector before it closes the window itself
         self.on_closed: Callable[[], None] | None = None
         self.present_requested.connect(self._present_pending, Qt.ConnectionType.QueuedConnection)
         self.close_requested.connect(self._close_now, Qt.ConnectionType.QueuedConnection)
-        self.grab_requested.connect(self._grab_pending, Qt.ConnectionType.QueuedConnection)
+        self.call_requested.connect(self._run_calls, Qt.ConnectionType.QueuedConnection)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
         if not self.closing and self.on_closed is not None:
@@ -253,29 +253,29 @@ class _ProjectorWindow(QWidget):
             self._pending = (serial, image, done)
         self.present_requested.emit()
 
-    def request_grab(self, grab: Callable[[], np.ndarray], box: dict, done: threading.Event) -> None:
-        """From a worker thread: run ``grab()`` on the UI thread, its result or error into ``box``."""
+    def request_call(self, fn: Callable[[], object], box: dict, done: threading.Event) -> None:
+        """From a worker thread: run ``fn()`` on the UI thread, its result or error into ``box``."""
         with self._lock:
-            self._grabs.append((grab, box, done))
-        self.grab_requested.emit()
+            self._calls.append((fn, box, done))
+        self.call_requested.emit()
 
     def wake_waiters(self) -> None:
-        """Release any show() or grab waiting for the UI thread (its caller then checks why)."""
+        """Release any show() or call waiting for the UI thread (its caller then checks why)."""
         with self._lock:
             pending, self._pending = self._pending, None
-            grabs, self._grabs = self._grabs, []
+            calls, self._calls = self._calls, []
         deferred, self._deferred = self._deferred, None
-        for item in (pending, deferred, *grabs):
+        for item in (pending, deferred, *calls):
             if item is not None:
                 item[-1].set()
 
     @Slot()
-    def _grab_pending(self) -> None:
+    def _run_calls(self) -> None:
         with self._lock:
-            grabs, self._grabs = self._grabs, []
-        for grab, box, done in grabs:
+            calls, self._calls = self._calls, []
+        for fn, box, done in calls:
             try:
-                box["value"] = grab()
+                box["value"] = fn()
             except Exception as exc:  # noqa: BLE001 - handed to the waiting thread, never out of the slot
                 box["error"] = exc
             finally:
@@ -489,43 +489,71 @@ class QtScreenProjector:
         return _rgb_array(self.window.grab().toImage())
 
     def grab_screen(self) -> np.ndarray:
-        """What the projector's whole screen displays now, as (Hp, Wp, 3) uint8; from any thread.
+        """What the projector's screen displays now, as (Hp, Wp, 3) uint8; from any thread.
 
-        This is what a camera looking at the screen sees: every window on it, composited by
-        the platform, in device pixels. From a worker thread the grab runs on the UI thread
-        (whose event loop must be running, or which must be waiting in :meth:`idle`).
+        This is what a camera looking at the screen sees: the window's content as the platform
+        displays it (its backing store, not a fresh paint) where the window is, black where it
+        does not cover the screen. From a worker thread the grab runs on the UI thread (whose
+        event loop must be running, or which must be waiting in :meth:`idle`).
 
         Raises
         ------
         DeviceError
-            The screen was disconnected, the UI thread did not answer within ``timeout``, or
-            the platform's screen grab is not in device pixels (Qt's offscreen platform at a
-            device-pixel ratio other than 1 returns a wrong picture).
+            The screen was disconnected or the window closed, the UI thread did not answer
+            within ``timeout``, or the platform's grab is not in device pixels (Qt's offscreen
+            platform at a device-pixel ratio other than 1).
+
+        Notes
+        -----
+        The window is grabbed by its id: Qt's offscreen platform grabs a whole screen
+        (``grabWindow(0)``) from the origin of the desktop rather than of that screen, which
+        gives an uninitialised picture for a screen that is not at (0, 0).
         """
         if self._lost:
             raise DeviceError(self._lost)
-        if _on_ui_thread():
-            return self._grab_screen_now()
-        box: dict = {}
-        done = threading.Event()
-        self.window.request_grab(self._grab_screen_now, box, done)
-        if not done.wait(self.timeout):
-            raise DeviceError(f"the UI thread did not grab screen {self.screen_name!r} within {self.timeout:g} s; is its event loop blocked?")
-        if self._lost:
-            raise DeviceError(self._lost)
-        if "error" in box:
-            raise box["error"]
-        return box["value"]
+        return self.call_on_ui(self._grab_screen_now, what=f"grab screen {self.screen_name!r}")
 
     def _grab_screen_now(self) -> np.ndarray:
-        pixmap = self._qscreen.grabWindow(0)
-        image = _rgb_array(pixmap.toImage())
-        if image.shape[:2] != tuple(self.resolution) or pixmap.devicePixelRatio() != 1.0:
+        if self._lost:
+            raise DeviceError(self._lost)
+        pixmap = self._qscreen.grabWindow(self.window.winId())
+        content = _rgb_array(pixmap.toImage())
+        win, scr = self.window.geometry(), self._qscreen.geometry()
+        expected = (round(win.height() * self._dpr), round(win.width() * self._dpr))
+        if content.shape[:2] != expected:
             raise DeviceError(
-                f"the screen grab of {self.screen_name!r} is {image.shape[1]}x{image.shape[0]} at device-pixel ratio "
-                f"{pixmap.devicePixelRatio():g}, not the screen's {self.resolution[1]}x{self.resolution[0]} device pixels"
+                f"the grab of the projector window on {self.screen_name!r} is {content.shape[1]}x{content.shape[0]} "
+                f"pixels, not its {expected[1]}x{expected[0]} device pixels (device-pixel ratio {self._dpr:g})"
             )
-        return image
+        hp, wp = self.resolution
+        screen = np.zeros((hp, wp, 3), np.uint8)
+        y0, x0 = round((win.y() - scr.y()) * self._dpr), round((win.x() - scr.x()) * self._dpr)
+        ys, xs = slice(max(y0, 0), min(y0 + expected[0], hp)), slice(max(x0, 0), min(x0 + expected[1], wp))
+        if ys.start < ys.stop and xs.start < xs.stop:
+            screen[ys, xs] = content[ys.start - y0 : ys.stop - y0, xs.start - x0 : xs.stop - x0]
+        return screen
+
+    def call_on_ui(self, fn: Callable[[], object], *, what: str = "answer"):
+        """Run ``fn()`` on the UI thread (directly when called there) and return its result.
+
+        Raises
+        ------
+        DeviceError
+            The UI thread did not run it within ``timeout`` (its event loop is blocked), or the
+            screen was lost meanwhile; ``fn``'s own exceptions propagate.
+        """
+        if _on_ui_thread():
+            return fn()
+        box: dict = {}
+        done = threading.Event()
+        self.window.request_call(fn, box, done)
+        if not done.wait(self.timeout):
+            raise DeviceError(f"the UI thread did not {what} within {self.timeout:g} s; is its event loop blocked?")
+        if "error" in box:
+            raise box["error"]
+        if "value" not in box:  # woken without running: the screen or window is gone
+            raise DeviceError(self._lost or f"the UI thread did not {what}")
+        return box["value"]
 
     def close(self) -> None:
         """Close the window. Idempotent; safe from any thread."""

@@ -29,6 +29,7 @@ _BACKENDS = {
     "replay": "devices.replay",
     "opencv": "devices.opencv_camera",
     "hotfolder": "devices.hotfolder",
+    "loopback": "devices.loopback",
     "gphoto2": "devices.gphoto2_camera",
     "harvesters": "devices.harvesters_camera",
 }

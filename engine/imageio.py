@@ -553,6 +553,8 @@ def decode_raw(source, *, name: str | None = None) -> RawDecode:
         raise InputError(f"{name or 'RAW data'}: data must be bytes or a path, got {type(source).__name__}")
     try:
         with rawpy.imread(data) as raw:
+            if raw.raw_type == rawpy.RawType.Stack:  # a linear DNG: values per pixel, no mosaic
+                return _decode_linear(raw)
             mosaic = np.array(raw.raw_image_visible, copy=True)
             white = float(raw.white_level)
             black = float(np.mean(raw.black_level_per_channel))
@@ -570,6 +572,23 @@ def decode_raw(source, *, name: str | None = None) -> RawDecode:
         if clipped.any():
             saturated |= _grow_3x3(clipped)
     return RawDecode(image=image, saturated=saturated, black_level=black, white_level=white)
+
+
+def _decode_linear(raw) -> RawDecode:
+    """A linear ("stacked") DNG: three values per pixel, read as stored.
+
+    LibRaw's ``postprocess`` scales such files by 1 / white level instead of
+    1 / (white − black) (3 % low at a 14-bit camera's black level of 512) and reports no clipped
+    pixel, so the values are taken from ``raw_image_visible`` with the file's own levels.
+    """
+    n = int(raw.num_colors)
+    values = np.asarray(raw.raw_image_visible)[..., :n].astype(np.float32)
+    black = np.asarray(raw.black_level_per_channel[:n], np.float32)
+    white = float(raw.white_level)
+    image = (values - black) / (np.float32(white) - black)
+    np.maximum(image, 0.0, out=image)  # as LibRaw clips noise below black for mosaics
+    saturated = np.any(values >= white, axis=2)
+    return RawDecode(image=np.ascontiguousarray(image), saturated=saturated, black_level=float(black.mean()), white_level=white)
 
 
 def read_raw_bytes(data: bytes, *, name: str = "<RAW bytes>") -> np.ndarray:
