@@ -9,7 +9,8 @@ must refuse further calls until it finishes (see :class:`Watchdog`).
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from engine.errors import DeviceError, InputError
 
@@ -100,14 +101,3 @@ def call_with_timeout(fn: Callable[..., Any], *args: Any, timeout: float, what: 
     return Watchdog(device).call(fn, *args, timeout=timeout, what=what)
 
 
-def check_positive(name: str, value, *, allow_none: bool = False) -> float | None:
-    """Return ``value`` as a float if it is a finite number > 0 (an exposure, a timeout)."""
-    if value is None and allow_none:
-        return None
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a positive number, got {value!r}") from None
-    if not v > 0 or v == float("inf"):
-        raise InputError(f"{name} must be a positive finite number, got {value!r}")
-    return v

@@ -62,7 +62,7 @@ class ResponseCurve:
         return int(self.lut.shape[0])
 
     @classmethod
-    def from_gamma(cls, gamma: float, *, levels: int = 256) -> "ResponseCurve":
+    def from_gamma(cls, gamma: float, *, levels: int = 256) -> ResponseCurve:
         """A power law: radiance = (code / (levels-1)) ** gamma."""
         g = float(gamma)
         if not (np.isfinite(g) and g > 0):
@@ -71,14 +71,14 @@ class ResponseCurve:
         return cls(x**g, name=f"gamma {g:g}")
 
     @classmethod
-    def srgb(cls, *, levels: int = 256) -> "ResponseCurve":
+    def srgb(cls, *, levels: int = 256) -> ResponseCurve:
         """The sRGB transfer function (IEC 61966-2-1), the usual webcam encoding."""
         x = np.linspace(0.0, 1.0, int(levels))
         lin = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
         return cls(lin, name="srgb")
 
     @classmethod
-    def linear(cls, *, levels: int = 65536) -> "ResponseCurve":
+    def linear(cls, *, levels: int = 65536) -> ResponseCurve:
         """Codes already proportional to radiance (RAW-like 16-bit data)."""
         return cls(np.linspace(0.0, 1.0, int(levels)), name="linear")
 

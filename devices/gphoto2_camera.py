@@ -30,9 +30,10 @@ from pathlib import PurePosixPath
 
 import numpy as np
 
-from devices._common import DeviceTimeout, Watchdog, call_with_timeout, check_positive
+from devices._common import DeviceTimeout, Watchdog, call_with_timeout
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 from engine.imageio import RAW_EXTENSIONS, decode_raw
 

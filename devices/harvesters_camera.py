@@ -30,9 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from devices._common import Watchdog, check_positive
+from devices._common import Watchdog
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
 __all__ = ["HarvestersCamera", "open_camera", "probe"]

@@ -18,14 +18,14 @@ import os
 import subprocess
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from devices._common import check_positive
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 from engine.imageio import RAW_EXTENSIONS, decode_raw, image_info, read_image
 

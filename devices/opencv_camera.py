@@ -23,10 +23,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from devices._common import Watchdog, check_positive
+from devices._common import Watchdog
 from devices._linearize import SATURATION_FRACTION, ResponseCurve, calibrate_response, response_curve
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
 __all__ = ["OpenCVCamera", "open_camera", "probe"]

@@ -22,7 +22,8 @@ import os
 import sys
 import threading
 import time
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from PySide6.QtCore import QCoreApplication, QEventLoop, QPoint, QRect, Qt, QThread, QTimer, Signal, Slot

@@ -29,15 +29,16 @@ import io
 import json
 import os
 import secrets
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
 import rawpy
 
-from engine._checks import check_float_image
+from engine.checks import check_float_image
 from engine.errors import InputError
 
 __all__ = [

@@ -24,7 +24,7 @@ from devices.virtual.render import Renderer
 from devices.virtual.scene import Scene, load_scene, scene_names
 from devices.virtual.setup import Geometry, Setup, load_or_build
 from devices.virtual.truth import Components, Truth
-from engine._checks import check_choice
+from engine.checks import check_choice
 from engine.errors import InputError
 
 __all__ = ["open_rig", "probe", "VirtualRig", "Truth", "Components", "CameraModel", "ProjectorModel",

@@ -15,7 +15,7 @@ import pytest
 
 gp = pytest.importorskip("gphoto2")
 
-from app.cli import main  # noqa: E402
+from app.main import main  # noqa: E402
 from devices.gphoto2_camera import GPhoto2Camera, list_cameras, probe  # noqa: E402
 from engine.errors import DeviceError  # noqa: E402
 

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("harvesters.core")
 genicam = pytest.importorskip("genicam")
 
-from app.cli import main  # noqa: E402
+from app.main import main  # noqa: E402
 from devices.harvesters_camera import HarvestersCamera, probe  # noqa: E402
 from engine.errors import DeviceError  # noqa: E402
 
@@ -59,7 +59,7 @@ def test_the_librarys_own_error_log_stays_off_the_terminal(tmp_path):
     bad.write_text("not a shared library")
     root = Path(__file__).resolve().parents[2]
     env = dict(os.environ, QT_QPA_PLATFORM="offscreen", PYTHONPATH=str(root))
-    out = subprocess.run([sys.executable, "-m", "app.cli", "devices", "--check", f"harvesters:{bad}"],
+    out = subprocess.run([sys.executable, "-m", "app.main", "devices", "--check", f"harvesters:{bad}"],
                          cwd=root, env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 1
     (line,) = out.stderr.strip().splitlines()

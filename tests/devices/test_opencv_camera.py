@@ -242,7 +242,7 @@ def test_a_camera_index_with_no_device_is_one_plain_line(capfd):
     the terminal, and the CLI prints one line."""
     import glob
 
-    from app.cli import main
+    from app.main import main
 
     index = 97
     if glob.glob(f"/dev/video{index}"):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import devices
-from app.cli import main
+from app.main import main
 from devices import loopback
 from engine.acquire.predict import relative_error
 from engine.recolor import recolor
