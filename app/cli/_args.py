@@ -98,3 +98,14 @@ def open_rig(args):
             if value not in (None, False):
                 options[key] = value
     return devices.open_rig(args.rig, **options)
+
+
+def report_session(session, command: str) -> None:
+    """Say on stderr what opening the session repaired: temporary files removed, unreadable captures set aside."""
+    import sys
+
+    for rel in session.removed:
+        print(f"albedit {command}: note: removed {rel}, left by a write that was killed", file=sys.stderr)
+    for old, new, why in session.quarantined:
+        print(f"albedit {command}: note: {old} could not be read ({why}); moved to {new}, it is taken again",
+              file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from app.cli._args import add_rig_options, levels, open_rig
+from app.cli._args import add_rig_options, levels, open_rig, report_session
 from app.cli.main import ProgressBar
 from engine.workflow import calibration_problems, open_session_for_rig, run_calibration
 
@@ -23,6 +23,7 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     with open_rig(args) as rig:
         session = open_session_for_rig(args.session, rig)
+        report_session(session, "calibrate")
         cal = run_calibration(rig, session, levels=args.levels, crosstalk=args.crosstalk, progress=ProgressBar())
     print(f"calibrated {rig.name} into {args.session}", file=sys.stderr)
     print(cal.metadata.get("coverage", ""), file=sys.stderr)

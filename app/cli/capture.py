@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import add_rig_options, fraction, frames, kappa, open_rig, order
+from app.cli._args import add_rig_options, fraction, frames, kappa, open_rig, order, report_session
 from app.cli.main import ProgressBar
 from engine.acquire import Adaptive, CaptureSettings
 from engine.errors import InputError
@@ -77,6 +77,7 @@ def run(args) -> int:
         else:
             session = Session.open(args.session)
             session.recover_orphans()
+        report_session(session, "capture")
         flood = None
         if args.flood is not None:
             hp, wp = rig.projector.resolution

@@ -34,10 +34,12 @@ def open_edit(path: Path, command: str) -> tuple[Document, Session]:
     if not path.is_dir():
         raise SessionError(f"no session folder at {path}")
     doc, session, warnings = open_document(path)
+    if doc.acquisition is None:
+        if warnings:
+            raise SessionError(f"session {path} cannot be recolored: {'; '.join(warnings)}")
+        raise SessionError(f"session {path} has no acquisition to recolor: run `albedit capture` first")
     for line in warnings:
         print(f"albedit {command}: warning: {line}", file=sys.stderr)
-    if doc.acquisition is None:
-        raise SessionError(f"session {path} has no acquisition to recolor: run `albedit capture` first")
     return doc, session
 
 

@@ -6,6 +6,7 @@ corrupt or unsafe entry is deleted on read and reported as absent, so the caller
 
 from __future__ import annotations
 
+import errno
 import os
 import zipfile
 from pathlib import Path
@@ -31,13 +32,21 @@ def check_entry(arrays) -> dict[str, np.ndarray]:
 def write_entry(file: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write ``arrays`` (checked by :func:`check_entry`) to ``file`` atomically; OSError if it failed."""
 
-    def writer(temp: Path) -> None:
-        with zipfile.ZipFile(temp, "w", compression=zipfile.ZIP_STORED) as zf:
-            for name, array in arrays.items():
-                with zf.open(f"{name}.npy", "w", force_zip64=True) as fh:
-                    np.lib.format.write_array(fh, array, allow_pickle=False)
+    written = []
 
-    imageio.atomic_write(file, writer)
+    def writer(temp: Path) -> None:
+        with open(temp, "wb") as raw:
+            with zipfile.ZipFile(raw, "w", compression=zipfile.ZIP_STORED) as zf:
+                for name, array in arrays.items():
+                    with zf.open(f"{name}.npy", "w", force_zip64=True) as fh:
+                        np.lib.format.write_array(fh, array, allow_pickle=False)
+            written.append(raw.tell())
+
+    def verify(temp: Path) -> None:  # a full disk may truncate silently: the size must be what was written
+        if os.path.getsize(temp) != written[-1]:
+            raise OSError(errno.EIO, f"the cache entry written is {os.path.getsize(temp)} bytes, not {written[-1]}")
+
+    imageio.atomic_write(file, writer, verify=verify)
 
 
 def read_entry(file: Path) -> dict[str, np.ndarray] | None:

@@ -23,7 +23,7 @@ import numpy as np
 
 from engine import imageio
 from engine.checks import check_float_image, check_mask, check_order, check_resolution
-from engine.errors import InputError, SessionError
+from engine.errors import DiskFull, InputError, SessionError
 from engine.session import arrays as _arrays
 from engine.session import cache as _cache
 from engine.session import captures as _captures
@@ -368,6 +368,10 @@ class Session:
             new["captures"].append(entry)
             try:
                 self._commit(new)
+            except DiskFull as exc:
+                self._orphans.append(rel)
+                raise DiskFull(f"{exc} (capture {name!r} is complete on disk: the rerun adopts it)",
+                               free=exc.free, needed=exc.needed) from exc
             except SessionError as exc:
                 self._orphans.append(rel)
                 raise SessionError(

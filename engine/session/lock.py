@@ -77,7 +77,7 @@ def describe_holder(folder: Path) -> str:
 
 
 @contextmanager
-def hold(folder, purpose: str | None = None, *, wait: float = WAIT_SECONDS, idle: bool = False) -> Iterator[None]:
+def hold(folder, purpose: str | None = None, *, wait: float | None = None, idle: bool = False) -> Iterator[None]:
     """Hold ``folder``'s lock for the block (re-entrant within the process).
 
     Parameters
@@ -86,8 +86,8 @@ def hold(folder, purpose: str | None = None, *, wait: float = WAIT_SECONDS, idle
         A session folder.
     purpose : str, optional
         What the holder is doing, recorded in the lock file (default: the command line).
-    wait : float
-        Seconds to wait for another process to release it.
+    wait : float, optional
+        Seconds to wait for another process to release it (default :data:`WAIT_SECONDS`).
     idle : bool
         Only if no one writes the folder, this process included (to clean up after killed
         writes without touching a live write's files).
@@ -101,7 +101,7 @@ def hold(folder, purpose: str | None = None, *, wait: float = WAIT_SECONDS, idle
     """
     folder = Path(folder)
     key = _key(folder)
-    _acquire(folder, key, purpose or _command(), wait, idle)
+    _acquire(folder, key, purpose or _command(), WAIT_SECONDS if wait is None else wait, idle)
     try:
         yield
     finally:
