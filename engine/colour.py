@@ -31,6 +31,7 @@ __all__ = [
     "direct_colour",
     "kappa_for_albedo",
     "kappa_for_colour",
+    "kappa_ceiling",
     "kappa_limit",
     "luminance_weights",
     "parse_colour",
@@ -377,6 +378,40 @@ def kappa_limit(decomposition: Decomposition) -> np.ndarray:
     last, before = comps[-1], comps[-2]
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(last > 0, before / np.where(last > 0, last, 1.0), np.inf)
+
+
+def kappa_ceiling(decomposition: Decomposition, albedo=None) -> np.ndarray:
+    """Upper end of the κ range a control should offer, per channel (the lower end is 0).
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+    albedo : (3,) float, optional
+        The target's absolute albedo (:meth:`engine.albedo.AlbedoScale.albedo`), when a
+        reference measured it.
+
+    Returns
+    -------
+    (3,) float64
+        With the albedo: ``1 / albedo`` (an albedo of 1 is impossible), or
+        :func:`kappa_limit` if that is lower. Without: :func:`kappa_limit` (``inf`` when
+        nothing bounds it: the caller keeps its own display range).
+
+    Examples
+    --------
+    >>> comps = np.zeros((2, 1, 2, 3), np.float32)
+    >>> comps[0, 0, 0] = 1.0; comps[1, 0, 0] = 0.1
+    >>> d = Decomposition(comps, np.zeros((1, 2, 3), np.float32), np.array([[True, False]]))
+    >>> kappa_ceiling(d).round(3).tolist(), kappa_ceiling(d, [0.5, 0.05, 0.2]).round(3).tolist()
+    ([10.0, 10.0, 10.0], [2.0, 10.0, 5.0])
+    """
+    limit = kappa_limit(decomposition)
+    if albedo is None:
+        return limit
+    rho = _colour3("albedo", albedo)
+    if np.any(rho <= 0) or np.any(rho >= 1):
+        raise InputError(f"albedo must be in (0, 1) in every channel, got {rho.tolist()}")
+    return np.minimum(limit, 1.0 / rho)
 
 
 @dataclass(frozen=True)
