@@ -5,8 +5,9 @@ wall and ceiling, a ceiling lamp — with a ColorChecker Classic (24 patch quads
 card) on the back wall and a painted panel under it, both facing the co-axial projector (an
 offset pose beside the camera is there too). Patch albedos are
 :func:`engine.checker.reference_reflectances`: the chart's published reflectances integrated
-over the virtual camera's channels, so the scene's truth is colour-science's data. Run ``python -m devices.virtual.checker_scene`` to rewrite the JSON
-after changing this file (a test checks that they agree).
+over the virtual camera's channels, so the scene's truth is colour-science's data. Run
+``python -m devices.virtual.checker_scene`` to rewrite the JSON after changing this file (a
+test checks that they agree).
 """
 
 from __future__ import annotations
