@@ -219,7 +219,9 @@ def _fit(d: np.ndarray, rho: np.ndarray, xy: np.ndarray | None, used: np.ndarray
 
 
 def _light(plane: np.ndarray | None, xy: np.ndarray | None, n: int) -> np.ndarray:
-    return np.ones(n) if plane is None else _plane_light(plane, xy)
+    if plane is None or xy is None:
+        return np.ones(n)
+    return _plane_light(plane, xy)
 
 
 def _plane_light(plane: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -155,7 +155,7 @@ class Checker:
 
     def mask(self, *, fraction: float = 0.5) -> np.ndarray:
         """(H, W) bool: every patch's sampled pixels (a target for measuring D on the chart)."""
-        return self.patch_masks(fraction=fraction).any(axis=0)
+        return np.asarray(self.patch_masks(fraction=fraction).any(axis=0))
 
 
 def checker_from_corners(corners, shape) -> Checker:

@@ -121,8 +121,9 @@ def parse_colour(text: str) -> np.ndarray:
     raw = text.strip()
     space, _, body = raw.partition(":") if ":" in raw else ("", "", raw)
     space = space.strip().lower()
-    if not space and _HEX.match(body.strip()):
-        digits = _HEX.match(body.strip()).group(1)
+    hex_match = None if space else _HEX.match(body.strip())
+    if hex_match is not None:
+        digits = hex_match.group(1)
         if len(digits) == 3:
             digits = "".join(d * 2 for d in digits)
         encoded = np.array([int(digits[i:i + 2], 16) for i in (0, 2, 4)], np.float64) / 255.0
