@@ -35,6 +35,7 @@ __all__ = [
     "kappa_limit",
     "luminance_weights",
     "parse_colour",
+    "pick_colour",
     "to_hex",
     "to_lab",
     "to_srgb",
@@ -202,6 +203,52 @@ def to_lab(linear, *, exposure: float = 0.0) -> np.ndarray:
     colour = colour_science()
     xyz = _srgb_to_xyz() @ (_colour3("linear", linear) * 2.0 ** float(exposure))
     return np.asarray(colour.XYZ_to_Lab(xyz, _white_xy()), np.float64) + 0.0
+
+
+def pick_colour(image, x: float, y: float, *, radius: int = 2, encoded: bool = False) -> np.ndarray:
+    """An eyedropper: the mean colour of a small square around a pixel.
+
+    Parameters
+    ----------
+    image : (H, W, 3) float
+        Linear radiance (the photograph), or sRGB-encoded 0–1 values (a reference picture
+        from elsewhere) with ``encoded=True``.
+    x, y : float
+        Pixel (column, row) picked; the square is clipped to the image.
+    radius : int
+        Half-size of the square: ``(2 radius + 1)²`` pixels averaged (noise, texture).
+    encoded : bool
+        Decode sRGB to linear before averaging (averaging encoded values would bias dark).
+
+    Returns
+    -------
+    (3,) float64
+        Linear RGB.
+
+    Raises
+    ------
+    InputError
+        A point outside the image, a negative radius, or a non-RGB image.
+
+    Examples
+    --------
+    >>> img = np.zeros((5, 5, 3), np.float32); img[1:4, 1:4] = [0.2, 0.4, 0.6]
+    >>> np.round(pick_colour(img, 2, 2, radius=1), 3).tolist()
+    [0.2, 0.4, 0.6]
+    """
+    img = check_float_image("image", image, ndim=3)
+    if img.shape[2] != 3:
+        raise InputError(f"image must be RGB (H, W, 3), got shape {img.shape}")
+    h, w = img.shape[:2]
+    if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
+        raise InputError(f"radius must be a non-negative integer (pixels), got {radius!r}")
+    col, row = int(round(float(x))), int(round(float(y)))
+    if not (0 <= col < w and 0 <= row < h):
+        raise InputError(f"the point ({x}, {y}) is outside the {w}×{h} image")
+    patch = img[max(row - radius, 0):row + radius + 1, max(col - radius, 0):col + radius + 1].astype(np.float64)
+    if encoded:
+        patch = _decode_srgb(np.clip(patch, 0.0, 1.0))
+    return patch.reshape(-1, 3).mean(axis=0)
 
 
 def direct_colour(decomposition: Decomposition, *, direct=None) -> np.ndarray:
