@@ -70,8 +70,8 @@ def linear_dng(raw: np.ndarray, *, black: int, white: int) -> bytes:
     Returns
     -------
     bytes
-        A little-endian TIFF/DNG whose directory comes last, so a file cut short anywhere is
-        unreadable rather than silently incomplete.
+        A little-endian TIFF/DNG whose directory comes last, so a file cut short before its
+        last 4 bytes is unreadable rather than silently incomplete.
     """
     raw = np.ascontiguousarray(raw, dtype="<u2")
     h, w, c = raw.shape
