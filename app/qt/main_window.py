@@ -338,11 +338,13 @@ class MainWindow(QMainWindow):
 
     # ================================================================== document
     def set_document(self, document: Document, session=None, *, rig=None, scratch: Path | None = None) -> None:
-        """Show ``document`` (replacing the current one, whose rig is closed).
+        """Show ``document`` (replacing the current one, whose rig is closed unless it is ``rig``).
 
         ``scratch`` is a temporary folder holding ``session`` (the demo's): Save copies the
         session elsewhere, and the folder is deleted when the document is closed.
         """
+        if rig is not None and rig is self.rig:  # e.g. the rig just calibrated: keep it open
+            self.rig = None
         self._teardown()
         self.doc, self.session = document, session
         self.rig, self.scratch = rig, scratch

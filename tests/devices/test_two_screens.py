@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
         ("hidpi", "test_projector_window.py"),
         ("desk", "test_loopback.py"),
         ("desk", "test_loopback_faults.py"),
+        ("desk", "test_journey.py"),
     ],
 )
 def test_on_two_screens(tmp_path, layout, module):
