@@ -293,8 +293,6 @@ class LoopbackRig(Rig):
 def _sensor(scene):
     """The bench camera's sensor: the virtual rig's, in radiance per second of exposure at full scale."""
     model = scene.camera.model
-    if model.ideal:
-        raise InputError("the loopback bench has a realistic sensor only (its files are 16-bit)")
     full_scale = model.white_level - model.black_level
     bench = dataclasses.replace(model, electrons_per_radiance=model.electrons_per_dn * full_scale)
     exposure = scene.camera.exposure * model.electrons_per_radiance / bench.electrons_per_radiance

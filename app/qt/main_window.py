@@ -39,6 +39,7 @@ from app.qt.preview import PreviewController
 from app.qt.undo import QtHistory
 from app.qt.worker import Job
 from engine.errors import InputError
+from engine.imageio import RAW_EXTENSIONS
 from engine.progress import checkpoint
 from engine.session import Session
 
@@ -737,9 +738,9 @@ class MainWindow(QMainWindow):
             self.open_path(path)
 
     def _on_open_image(self) -> None:
+        raws = " ".join(f"*{ext}" for ext in sorted(RAW_EXTENSIONS))  # the one list read_image decodes
         path, _ = QFileDialog.getOpenFileName(
-            self, "Open image", self._last_dir(),
-            "Images (*.exr *.tif *.tiff *.png *.jpg *.jpeg *.nef *.cr2 *.cr3 *.arw *.dng *.raf *.orf *.rw2)")
+            self, "Open image", self._last_dir(), f"Images (*.exr *.tif *.tiff *.png *.jpg *.jpeg {raws})")
         if path:
             self.open_path(path)
 
