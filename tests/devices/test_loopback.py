@@ -45,6 +45,8 @@ def test_options_faults_and_the_missing_second_screen():
         devices.open_rig("loopback:cornell", projector="vga:1")
     with pytest.raises(DeviceError, match="no second screen for the projector"):
         devices.open_rig("loopback:cornell")  # the offscreen test platform has one screen
+    from devices.virtual import scene_names
+
     entries = [a for a in devices.available() if a.name.startswith("loopback:")]
-    assert [a.name for a in entries] == ["loopback:cornell", "loopback:three", "loopback:wedge"]
+    assert [a.name for a in entries] == [f"loopback:{name}" for name in scene_names()]  # every virtual scene
     assert not entries[0].ok and "pass projector='qtscreen:0'" in entries[0].reason
