@@ -152,6 +152,8 @@ def load_scene(name_or_path: str | Path) -> Scene:
         if not path.is_file():
             raise InputError(f"unknown virtual scene {text!r}; expected one of {scene_names()} or a path to a .json file")
     try:
+        if not path.exists():
+            raise InputError(f"cannot read scene file {str(path)!r}: there is no such file")
         if not path.is_file():
             raise InputError(f"scene file {str(path)!r} is not a regular file")
         if path.stat().st_size > MAX_SCENE_BYTES:
