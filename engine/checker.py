@@ -286,6 +286,11 @@ def _detector():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             import colour_checker_detection
+    except ImportError:
+        raise InputError(
+            "automatic colour-checker detection needs colour-checker-detection "
+            "(pip install --no-deps colour-checker-detection); place the chart's four corners by hand instead"
+        ) from None
     finally:
         np.set_printoptions(**printing)
     return colour_checker_detection
