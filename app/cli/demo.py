@@ -27,7 +27,7 @@ from engine.session import Session
 from engine.workflow import (
     edit_from_plan,
     estimated_report,
-    load_decomposition,
+    noise_reduced,
     run_calibration,
     run_capture,
     save_edit,
@@ -99,7 +99,7 @@ def run(args) -> int:
     d = result.decomposition
     raw_rel = relative_error(recolor(d, args.kappa), truth)
     if args.denoise > 0:
-        d = load_decomposition(session, result.key, denoise=args.denoise)
+        d = noise_reduced(session, result.key, d, args.denoise)
     ours = recolor(d, args.kappa)
     rel, rel_surfaces = relative_error(ours, truth), relative_error(ours, truth, surfaces)
     naive = np.where(mask[:, :, None], photo * args.kappa.astype(np.float32), photo)

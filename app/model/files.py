@@ -42,6 +42,20 @@ from engine.workflow import (
 PHOTOGRAPH = "photograph"
 UNREACHABLE = "unreachable"
 
+class NeedsClipping(InputError):
+    """An integer export would have to clip values outside [0, 1]; exporting again with ``clip=True`` allows it.
+
+    Attributes
+    ----------
+    values : int
+        How many values fall outside [0, 1].
+    """
+
+    def __init__(self, message: str, *, values: int) -> None:
+        super().__init__(message)
+        self.values = values
+
+
 #: Export choices: extension → allowed dtypes (first is the default).
 EXPORT_FORMATS = {
     ".exr": ("half", "float"),
@@ -290,7 +304,9 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
     Raises
     ------
     InputError
-        Nothing acquired, unsupported format/dtype, values out of range for uint16.
+        Nothing acquired, unsupported format or dtype.
+    NeedsClipping
+        Values out of range for uint16 without ``clip`` (an :class:`InputError` too).
     Cancelled
         Stopped before the write started (nothing written).
     """
@@ -317,10 +333,9 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
         pixels = image * np.float32(2.0**exposure)
         over = int(np.count_nonzero((pixels > 1.0) | (pixels < 0.0)))
         if over and not clip:
-            raise InputError(
+            raise NeedsClipping(
                 f"{over} values fall outside [0, 1] after an exposure of {exposure:+g} stops and a 16-bit TIFF "
-                "cannot hold them: lower the exposure, export float, or allow clipping"
-            )
+                "cannot hold them: lower the exposure, export float, or allow clipping", values=over)
         pixels = np.clip(pixels, 0.0, 1.0)
         meta[METADATA_KEY]["linear"] = {"exposure": float(exposure), "clipped_values": over}
     else:

@@ -817,7 +817,7 @@ class MainWindow(QMainWindow):
         exposure = self.exposure_spin.value()
 
         def failed(exc):
-            if isinstance(exc, InputError) and "allow clipping" in str(exc) and not clip:
+            if isinstance(exc, files.NeedsClipping) and not clip:
                 answer = QMessageBox.question(self, "Export", f"{exc}\n\nClip those values to 1 and export anyway?")
                 if answer == QMessageBox.StandardButton.Yes:
                     QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True))

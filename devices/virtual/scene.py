@@ -155,7 +155,8 @@ def load_scene(name_or_path: str | Path) -> Scene:
         if not path.exists():
             raise InputError(f"cannot read scene file {str(path)!r}: there is no such file")
         if not path.is_file():
-            raise InputError(f"scene file {str(path)!r} is not a regular file")
+            why = "it is not a regular file (a device or a folder)" if path.exists() else "no such file"
+            raise InputError(f"cannot read scene file {str(path)!r}: {why}")
         if path.stat().st_size > MAX_SCENE_BYTES:
             raise InputError(f"scene file {str(path)!r} is larger than {MAX_SCENE_BYTES} bytes; a scene is a few kB")
         raw = path.read_text(encoding="utf-8")
