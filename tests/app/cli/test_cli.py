@@ -90,3 +90,11 @@ def test_an_edit_saved_by_the_app_exports_from_the_command_line(acquired_doc, tm
     assert cli_meta == app_meta and cli_meta["edit"]["source"] == "synthetic"
     assert cli_meta["edit"]["cascade"] == ["floor", "Wand — links"] and cli_meta["edit"]["kappa"] == [2.0, 0.125, 1.5]
     assert [t["name"] for t in cli_meta["edit"]["targets"]] == ["floor", "Wand — links", "target 3"]
+
+
+def test_devices_lists_rigs_and_projectors(capsys):
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    rigs, projectors = out.split("Projectors")
+    assert "virtual:cornell: available" in rigs
+    assert "qtscreen:0: available" in projectors  # the offscreen platform's one screen
