@@ -20,6 +20,7 @@ _BACKENDS = {
     "hotfolder": "devices.hotfolder",
     "gphoto2": "devices.gphoto2_camera",
     "harvesters": "devices.harvesters_camera",
+    "mitsuba": "devices.mitsuba",
 }
 
 

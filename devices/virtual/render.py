@@ -36,8 +36,7 @@ class Renderer:
         self.setup = setup
         h, w = (int(x) for x in setup.resolution)
         self.shape = (h, w)
-        live = setup.quad >= 0
-        self.rho = np.where(live[:, None], scene.albedo[np.maximum(setup.quad, 0)], 0.0)
+        self.rho = scene.albedo_at(setup.quad, setup.a, setup.b)
         self.base = Resolvent(setup, self.rho)
         self.ambient_light = setup.light_ff @ scene.emission[setup.light_quads] if len(setup.light_quads) \
             else np.zeros((len(setup.quad), 3))
