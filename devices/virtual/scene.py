@@ -105,6 +105,15 @@ class Texture:
         odd = (iu + (iv if self.kind == "checker" else 0)) % 2 == 1
         return np.where(odd[:, None], self.albedo[None, :], base[None, :])
 
+    def cell(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(N,) int64 id of the texel (image) or pattern cell at ``a``, ``b`` (for edge detection)."""
+        a = np.clip(np.asarray(a, np.float64), 0.0, 1.0)
+        b = np.clip(np.asarray(b, np.float64), 0.0, 1.0)
+        nu, nv = (self.image.shape[1], self.image.shape[0]) if self.kind == "image" else self.cells
+        iu = np.minimum((a * nu).astype(np.int64), nu - 1)
+        iv = np.minimum((b * nv).astype(np.int64), nv - 1)
+        return iv * nu + iu
+
 
 @dataclass(frozen=True, eq=False)
 class Scene:

@@ -65,7 +65,7 @@ class PreparedTarget:
     coverage: np.ndarray | None = None
 
     def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3,
-                  edge_radius: int = 3) -> Decomposition:
+                  edge_radius: int = 1) -> Decomposition:
         """Decompose on the emittable pixels, then estimate the unreachable and edge ones near them.
 
         :func:`engine.decompose.decompose` on :attr:`mask`, then

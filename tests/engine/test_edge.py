@@ -28,10 +28,21 @@ def _two_sides(h=12, w=14, seed=0):
 def test_refine_mask_recovers_the_coverage_of_mixed_pixels(dtype):
     alpha, photo = _two_sides()
     painted = alpha >= 0.5
-    cov = refine_mask(painted, photo.astype(dtype))
+    cov = refine_mask(painted, photo.astype(dtype), snap=0.0)
     assert cov.dtype == np.float32
-    np.testing.assert_allclose(cov, alpha, atol=1.0 / 64)  # snapped within SNAP of 0 and 1
+    np.testing.assert_allclose(cov, alpha, atol=1e-5)
+    snapped = refine_mask(painted, photo.astype(dtype))  # within 0.1 of 0 or 1: exactly 0 or 1
+    np.testing.assert_array_equal(snapped[alpha <= 0.1], 0)
+    np.testing.assert_array_equal(snapped[alpha >= 0.9], 1)
     assert solid(cov).sum() == (alpha == 1).sum() and edge(cov).sum() == edge(alpha).sum()
+
+
+def test_refine_mask_follows_a_linear_shading_gradient():
+    alpha, photo = _two_sides()
+    ramp = np.linspace(0.6, 1.4, photo.shape[1], dtype=np.float32)[None, :, None]
+    shaded = (alpha[:, :, None] * A + (1 - alpha[:, :, None]) * B) * ramp  # both sides shaded alike
+    cov = refine_mask(alpha >= 0.5, shaded.astype(np.float32), snap=0.0)
+    np.testing.assert_allclose(cov[:, 6], alpha[:, 6], atol=0.03)
 
 
 def test_refine_mask_keeps_pixels_without_contrast_and_far_from_the_edge():
@@ -54,9 +65,13 @@ def _decomposition(order=3, h=12, w=14):
     unreached[out] = s_out[0] * B
     for i in range(order - 1):
         comps[i, out] = s_out[i + 1] * B
-    # the edge column was decomposed as non-target: some wrong split of its light
+    # the edge column is not re-emitted: its non-target decomposition (Eq. 9) holds its target
+    # part one interaction late (L̄_d = R^0 L_d, C R^m L_d = R^{m+1} L_d) plus its neighbour's
     col = ~target & ~out
-    unreached[col] = photo[col]
+    a = alpha[col][:, None]
+    unreached[col] = a * A * s_in[0] + (1 - a) * B * s_out[0]
+    for m in range(order - 1):
+        comps[m, col] = a * A * s_in[m + 1] + (1 - a) * B * s_out[m + 1]
     return Decomposition(comps, unreached, target), alpha, photo, s_in, s_out
 
 
@@ -71,7 +86,7 @@ def test_blend_edges_recolors_each_side_with_its_own_shares():
     got = recolor(blended, kappa)
     np.testing.assert_allclose(got, expected, rtol=2e-5, atol=1e-6)
     np.testing.assert_allclose(recolor(blended, 1.0), photo, rtol=1e-5, atol=1e-7)  # κ = 1: the photograph
-    # without blending the edge keeps its colour: the seam
+    # decomposed as non-target, the edge's target part misses one κ: the seam
     assert np.abs(recolor(d, kappa)[changed] - expected[changed]).max() > 0.1
 
 
