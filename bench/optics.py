@@ -112,23 +112,41 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
             results.append((label, recolor(_decomposition(exp._acq[name], denoise), kappa)))
         for label, img in results:
             e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
-            rows.append((tuple(np.round(kappa, 3)), label + (f" (denoise {denoise})" if denoise and label != "naive per-pixel" else ""),
-                         e_wall, e_in, e_wall / max(e_in, 1e-12), relative_error(img, truth, edge),
-                         relative_error(img, truth, keep), floor))
-    print(f"{'κ':>20} {'method':<34} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} {'noise floor':>11}")
+            rows.append(
+                (
+                    tuple(np.round(kappa, 3)),
+                    label + (f" (denoise {denoise})" if denoise and label != "naive per-pixel" else ""),
+                    e_wall,
+                    e_in,
+                    e_wall / max(e_in, 1e-12),
+                    relative_error(img, truth, edge),
+                    relative_error(img, truth, keep),
+                    floor,
+                )
+            )
+    print(
+        f"{'κ':>20} {'method':<34} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} "
+        f"{'noise floor':>11}"
+    )
     for k, label, e_wall, e_in, ratio, e_edge, e_img, floor in rows:
-        print(f"{str(k):>20} {label:<34} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {ratio:6.2f} {100 * e_edge:7.2f}% "
-              f"{100 * e_img:7.2f}% {100 * floor:10.2f}%")
-    print(f"wall: {wall.sum()} pixels ({edge.sum()} edge: coverage < 1 or next to it), times: "
-          + ", ".join(f"{k} {v:.0f} s" for k, v in exp.seconds.items()), flush=True)
+        print(
+            f"{str(k):>20} {label:<34} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {ratio:6.2f} {100 * e_edge:7.2f}% "
+            f"{100 * e_img:7.2f}% {100 * floor:10.2f}%"
+        )
+    print(
+        f"wall: {wall.sum()} pixels ({edge.sum()} edge: coverage < 1 or next to it), times: "
+        + ", ".join(f"{k} {v:.0f} s" for k, v in exp.seconds.items()),
+        flush=True,
+    )
     return rows
 
 
 def part_cornell(args):
     res, spp = (32, 128) if args.quick else (args.resolution, args.spp)
     print(f"\n== mitsuba:cornell {res}², {spp} spp per capture, order 4, ideal camera and projector ==")
-    rig = devices.open_rig("mitsuba:cornell", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp,
-                           truth_spp=spp)
+    rig = devices.open_rig(
+        "mitsuba:cornell", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp, truth_spp=spp
+    )
     exp = Experiment(rig, "right_wall", 4, cal_spp=64, spp=spp)
     exp.acquire("hard", exp.hard)
     soft = refine_mask(exp.hard, exp.photograph())
@@ -151,8 +169,14 @@ def part_virtual(args):
     exp.acquire("hard", exp.hard)
     exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
     exp.acquire("true", exp.coverage)
-    edge_table(exp, [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"), ("soft mask, true coverage", "true")],
-               [K1, K2], denoise_for=lambda k: 0, lamp=rig.truth.emitters(), floor_truth=False)
+    edge_table(
+        exp,
+        [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"), ("soft mask, true coverage", "true")],
+        [K1, K2],
+        denoise_for=lambda k: 0,
+        lamp=rig.truth.emitters(),
+        floor_truth=False,
+    )
     rig.close()
 
 
@@ -167,8 +191,9 @@ def part_fig13(args):
     table = {}
     for s in shares:
         for r in rough:
-            rig = devices.open_rig("mitsuba:wedge", ideal=True, resolution=(res, res), spp=spp, truth_spp=spp,
-                                   specular=s, roughness=r)
+            rig = devices.open_rig(
+                "mitsuba:wedge", ideal=True, resolution=(res, res), spp=spp, truth_spp=spp, specular=s, roughness=r
+            )
             ambient, flood = lighting(rig)
             rec = Recorder(rig, None)
             if calibration is None:  # geometry does not change with the coat: calibrate once
@@ -183,7 +208,10 @@ def part_fig13(args):
             rig.close()
     print(f"{'share':>6} " + " ".join(f"{r:>15}" for r in rough))
     for s in shares:
-        print(f"{s:6.3f} " + " ".join(f"{100 * table[s, r][0]:6.2f}/{100 * table[s, r][1]:5.2f}% " for r in rough), flush=True)
+        print(
+            f"{s:6.3f} " + " ".join(f"{100 * table[s, r][0]:6.2f}/{100 * table[s, r][1]:5.2f}% " for r in rough),
+            flush=True,
+        )
 
 
 def part_fig3(args):
@@ -201,14 +229,23 @@ def part_fig3(args):
     change = np.abs(truth - rig.truth.photograph(ambient=exp.ambient, pattern=exp.flood)).sum(-1)
     reflection = ~box & (change > 0.05 * np.maximum(photo.sum(-1), 1e-6)) & (np.arange(res)[:, None] > res // 2)
     naive = np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo)
-    rows = [("naive per-pixel", naive), ("previous (hard mask)", recolor(_decomposition(exp._acq["hard"], 0), kappa)),
-            ("soft mask, refined", recolor(_decomposition(exp._acq["soft"], 0), kappa))]
-    print(f"{'method':<24} {'image':>8} {'box':>8} {'reflection':>10}   (noise floor: image "
-          f"{100 * relative_error(truth2, truth):.2f}%, reflection {100 * relative_error(truth2, truth, reflection):.2f}%;"
-          f" {reflection.sum()} reflection pixels)")
+    rows = [
+        ("naive per-pixel", naive),
+        ("previous (hard mask)", recolor(_decomposition(exp._acq["hard"], 0), kappa)),
+        ("soft mask, refined", recolor(_decomposition(exp._acq["soft"], 0), kappa)),
+    ]
+    print(
+        f"{'method':<24} {'image':>8} {'box':>8} {'reflection':>10}   (noise floor: image "
+        f"{100 * relative_error(truth2, truth):.2f}%, "
+        f"reflection {100 * relative_error(truth2, truth, reflection):.2f}%;"
+        f" {reflection.sum()} reflection pixels)"
+    )
     for label, img in rows:
-        print(f"{label:<24} {100 * relative_error(img, truth):7.2f}% {100 * relative_error(img, truth, box):7.2f}% "
-              f"{100 * relative_error(img, truth, reflection):9.2f}%", flush=True)
+        print(
+            f"{label:<24} {100 * relative_error(img, truth):7.2f}% {100 * relative_error(img, truth, box):7.2f}% "
+            f"{100 * relative_error(img, truth, reflection):9.2f}%",
+            flush=True,
+        )
     del floor_px
     rig.close()
 
@@ -223,15 +260,22 @@ def part_fig12(args):
             label = f"virtual:textured {res}², supersampled 4×4"
         else:
             res, spp = (32, 128) if args.quick else (64, 1024)
-            rig = devices.open_rig("mitsuba:textured", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp,
-                                   truth_spp=spp)
+            rig = devices.open_rig(
+                "mitsuba:textured", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp, truth_spp=spp
+            )
             exp = Experiment(rig, "checker_wall", 4, cal_spp=64, spp=spp)
             label = f"mitsuba:textured {res}², {spp} spp"
         print(f"\n== Fig. 12: {label}, textured target, κ = {kappa.tolist()}, order 4 ==")
         exp.acquire("hard", exp.hard)
         exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
-        edge_table(exp, [("previous (hard mask)", "hard"), ("soft mask, refined", "soft")], [kappa],
-                   denoise_for=lambda k: 0, lamp=rig.truth.emitters(), floor_truth=backend == "mitsuba")
+        edge_table(
+            exp,
+            [("previous (hard mask)", "hard"), ("soft mask, refined", "soft")],
+            [kappa],
+            denoise_for=lambda k: 0,
+            lamp=rig.truth.emitters(),
+            floor_truth=backend == "mitsuba",
+        )
         rig.close()
 
 
@@ -255,7 +299,7 @@ def part_ratio(args):
     print(f"{'rig':<30} {'light':<16} {'R':>7} {'G':>7} {'B':>7} {'vs mitsuba (G)':>15} {'set-up':>8}")
     for light, ratio in mi_ratio.items():
         print(f"{'mitsuba, ' + str(spp) + ' spp':<30} {light:<16} " + " ".join(f"{x:7.4f}" for x in ratio))
-    for patch in ([0.2, 0.1] if args.quick else [0.2, 0.1, 0.0834]):
+    for patch in [0.2, 0.1] if args.quick else [0.2, 0.1, 0.0834]:
         t = time.perf_counter()
         v = devices.open_rig("virtual:cornell", ideal=True, resolution=(res, res), patch_size=patch, cache_dir=False)
         setup = time.perf_counter() - t
@@ -265,17 +309,30 @@ def part_ratio(args):
             direct = r.to_image(r.rho * e, ambient=ambient)
             full = v.truth.photograph(ambient=ambient, pattern=emitted)
             ratio = (full - direct)[wall].sum(0) / direct[wall].sum(0)
-            print(f"{'virtual, patches ' + str(patch) + ' m':<30} {light:<16} " + " ".join(f"{x:7.4f}" for x in ratio)
-                  + f" {100 * (ratio[1] / mi_ratio[light][1] - 1):+14.1f}% {setup:7.1f} s", flush=True)
+            print(
+                f"{'virtual, patches ' + str(patch) + ' m':<30} {light:<16} "
+                + " ".join(f"{x:7.4f}" for x in ratio)
+                + f" {100 * (ratio[1] / mi_ratio[light][1] - 1):+14.1f}% {setup:7.1f} s",
+                flush=True,
+            )
         v.close()
 
 
-PARTS = {"ratio": part_ratio, "cornell": part_cornell, "virtual": part_virtual, "fig13": part_fig13, "fig3": part_fig3, "fig12": part_fig12}
+PARTS = {
+    "ratio": part_ratio,
+    "cornell": part_cornell,
+    "virtual": part_virtual,
+    "fig13": part_fig13,
+    "fig3": part_fig3,
+    "fig12": part_fig12,
+}
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--parts", nargs="+", choices=sorted(PARTS), default=["virtual", "cornell", "fig12", "fig3", "fig13"])
+    parser.add_argument(
+        "--parts", nargs="+", choices=sorted(PARTS), default=["virtual", "cornell", "fig12", "fig3", "fig13"]
+    )
     parser.add_argument("--quick", action="store_true", help="tiny renders (a smoke run, not the figures)")
     parser.add_argument("--resolution", type=int, default=64)
     parser.add_argument("--spp", type=int, default=1024)

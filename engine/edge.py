@@ -24,9 +24,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from engine._checks import check_float_image, check_mask
+from engine.checks import check_float_image, check_mask
 from engine.decompose import Decomposition
 from engine.errors import InputError
+
 
 def check_coverage(name: str, coverage, shape: tuple[int, int]) -> np.ndarray:
     """A soft mask as float32 in [0, 1] (a boolean mask becomes 0/1).
@@ -49,7 +50,9 @@ def check_coverage(name: str, coverage, shape: tuple[int, int]) -> np.ndarray:
     if arr.shape != tuple(shape):
         raise InputError(f"{name} must have shape {tuple(shape)} (camera pixels), got {arr.shape}")
     if not np.all(np.isfinite(arr)) or arr.min(initial=0) < 0 or arr.max(initial=0) > 1:
-        raise InputError(f"{name} coverage must be finite and in [0, 1], got min {np.nanmin(arr):g}, max {np.nanmax(arr):g}")
+        raise InputError(
+            f"{name} coverage must be finite and in [0, 1], got min {np.nanmin(arr):g}, max {np.nanmax(arr):g}"
+        )
     return arr.astype(np.float32)
 
 
@@ -100,9 +103,9 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) 
     2008) with the two colours sampled locally instead of solved for globally. ``A`` is the
     mean, over the 8 directions ``d``, of the linear extrapolation to the pixel of the nearest
     two of ``p + d, p + 2d, p + 3d`` that are painted and not on the boundary (e.g.
-    ``2 I(p + d) − I(p + 2d)``); ``B`` likewise from the unpainted side. Extrapolating (rather than averaging a window) removes
-    most of the bias of shading gradients, which interreflections make steep at concave
-    corners. Exact for flat or linearly shaded colours.
+    ``2 I(p + d) − I(p + 2d)``); ``B`` likewise from the unpainted side. Extrapolating
+    (rather than averaging a window) removes most of the bias of shading gradients, which
+    interreflections make steep at concave corners. Exact for flat or linearly shaded colours.
 
     Examples
     --------
@@ -156,7 +159,9 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) 
     return out
 
 
-def blend_edges(decomposition: Decomposition, coverage, photograph, *, radius: int = 1) -> tuple[Decomposition, np.ndarray]:
+def blend_edges(
+    decomposition: Decomposition, coverage, photograph, *, radius: int = 1
+) -> tuple[Decomposition, np.ndarray]:
     """Recolor edge pixels: their target part as target, their neighbour's part as non-target.
 
     Parameters
@@ -222,7 +227,9 @@ def blend_edges(decomposition: Decomposition, coverage, photograph, *, radius: i
     size = (2 * r + 1,) * 2
 
     def box(x):
-        return cv2.boxFilter(np.ascontiguousarray(x, np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        return cv2.boxFilter(
+            np.ascontiguousarray(x, np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT
+        )
 
     n_in, n_out = box(inside), box(outside)
     sel = mixed[rows, cols] & (n_in > 0.5) & (n_out > 0.5)
@@ -244,7 +251,7 @@ def blend_edges(decomposition: Decomposition, coverage, photograph, *, radius: i
     num = alpha * i_in
     wgt = num / np.maximum(num + (1 - alpha) * i_out, 1e-30)
     pixel = light[vy, vx]
-    own = np.concatenate([unreached[None, vy, vx], comps[:k - 1, vy, vx]]).astype(np.float64)
+    own = np.concatenate([unreached[None, vy, vx], comps[: k - 1, vy, vx]]).astype(np.float64)
     own *= (pixel / np.maximum(own.sum(axis=0), 1e-30))[None]
     target_part = np.maximum(own - (1 - wgt)[None] * pixel[None] * s_out, 0)
     other = own - target_part
@@ -264,5 +271,11 @@ def blend_edges(decomposition: Decomposition, coverage, photograph, *, radius: i
         residual[fy, fx] = 0
     blended = none.copy()
     blended[fy, fx] = True
-    return Decomposition(components, new_unreached, decomposition.target, decomposition.constraint,
-                         decomposition.unreached_light, residual), blended
+    return Decomposition(
+        components,
+        new_unreached,
+        decomposition.target,
+        decomposition.constraint,
+        decomposition.unreached_light,
+        residual,
+    ), blended

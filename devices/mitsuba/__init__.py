@@ -21,13 +21,28 @@ from devices.base import Frame, Rig
 from devices.registry import Availability
 from devices.virtual.camera import CameraModel, VirtualCamera
 from devices.virtual.projector import ProjectorModel, VirtualProjector
-from engine._checks import check_choice
+from engine.checks import check_choice, check_resolution
 from engine.errors import InputError
 
 __all__ = ["open_rig", "probe", "MitsubaRig", "MitsubaCamera", "default_cache_dir"]
 
-_OPTIONS = ("ideal", "seed", "projector", "resolution", "projector_resolution", "ambient", "cache_dir", "spp",
-            "ambient_spp", "truth_spp", "max_depth", "specular", "roughness", "coverage_passes", "progress")
+_OPTIONS = (
+    "ideal",
+    "seed",
+    "projector",
+    "resolution",
+    "projector_resolution",
+    "ambient",
+    "cache_dir",
+    "spp",
+    "ambient_spp",
+    "truth_spp",
+    "max_depth",
+    "specular",
+    "roughness",
+    "coverage_passes",
+    "progress",
+)
 
 
 def default_cache_dir() -> Path:
@@ -157,7 +172,6 @@ def open_rig(arg: str, **options) -> MitsubaRig:
     from devices.mitsuba.render import Renderer, mitsuba
     from devices.mitsuba.scene import check_coat, load_rig_scene
     from devices.mitsuba.truth import Truth
-    from devices.virtual import _flag, _resolution
 
     unknown = sorted(set(options) - set(_OPTIONS))
     if unknown:
@@ -166,7 +180,9 @@ def open_rig(arg: str, **options) -> MitsubaRig:
     if not arg:
         from devices.mitsuba.scene import rig_names
 
-        raise InputError(f"mitsuba rig needs a scene: 'mitsuba:NAME' with NAME one of {rig_names()}, or a rig .json path")
+        raise InputError(
+            f"mitsuba rig needs a scene: 'mitsuba:NAME' with NAME one of {rig_names()}, or a rig .json path"
+        )
     rig_scene = load_rig_scene(arg)
     ideal = _flag(options.get("ideal", False), "ideal")
     ambient = _flag(options.get("ambient", True), "ambient")
@@ -174,8 +190,8 @@ def open_rig(arg: str, **options) -> MitsubaRig:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"seed must be a non-negative int, got {seed!r}")
     kind = check_choice("projector", options.get("projector", "coaxial"), ["coaxial", "offset"])
-    res = _resolution(options.get("resolution", (64, 64)), "resolution")
-    pres = _resolution(options.get("projector_resolution", res), "projector_resolution")
+    res = check_resolution("resolution", options.get("resolution", (64, 64)), maximum=4096)
+    pres = check_resolution("projector_resolution", options.get("projector_resolution", res), maximum=4096)
     spp = _positive_int(options.get("spp", 256), "spp")
     ambient_spp = _positive_int(options.get("ambient_spp", 4096), "ambient_spp")
     truth_spp = _positive_int(options.get("truth_spp", 1024), "truth_spp")
@@ -195,9 +211,20 @@ def open_rig(arg: str, **options) -> MitsubaRig:
     elif not isinstance(cache, (str, os.PathLike)):
         raise InputError(f"cache_dir must be a path, None or False, got {cache!r}")
 
-    renderer = Renderer(rig_scene, res, pres, projector=kind, spp=spp, ambient_spp=ambient_spp, truth_spp=truth_spp,
-                        max_depth=depth, materials=materials, cache_dir=None if cache is None else Path(cache),
-                        progress=options.get("progress"), seed=int(seed))
+    renderer = Renderer(
+        rig_scene,
+        res,
+        pres,
+        projector=kind,
+        spp=spp,
+        ambient_spp=ambient_spp,
+        truth_spp=truth_spp,
+        max_depth=depth,
+        materials=materials,
+        cache_dir=None if cache is None else Path(cache),
+        progress=options.get("progress"),
+        seed=int(seed),
+    )
     renderer.ambient = ambient
     coverage_all = renderer.coverage(passes)
     pmodel = ProjectorModel.perfect() if ideal else ProjectorModel.realistic()
@@ -215,8 +242,9 @@ def open_rig(arg: str, **options) -> MitsubaRig:
         coverage[tname] = coverage_all[sel].sum(axis=0)
         targets[tname] = coverage[tname] >= 0.5
     lighting = _lighting(rig_scene)
-    return MitsubaRig(name, camera, projector, targets=targets, coverage=coverage, truth=truth, renderer=renderer,
-                      lighting=lighting)
+    return MitsubaRig(
+        name, camera, projector, targets=targets, coverage=coverage, truth=truth, renderer=renderer, lighting=lighting
+    )
 
 
 def _lighting(rig_scene) -> dict:
@@ -225,6 +253,12 @@ def _lighting(rig_scene) -> dict:
 
         return dict(load_scene(rig_scene.scene.partition(":")[2]).lighting)
     return {"ambient": True, "projector_flood": 0.0}
+
+
+def _flag(value, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def _positive_int(value, name: str) -> int:

@@ -79,9 +79,22 @@ class Renderer:
         Mitsuba shapes in the order of their ``shape_index``.
     """
 
-    def __init__(self, rig_scene, resolution, projector_resolution, *, projector: str = "coaxial", spp: int = 256,
-                 ambient_spp: int = 4096, truth_spp: int = 1024, max_depth: int = 32, materials=None,
-                 cache_dir: Path | None = None, progress=None, seed: int = 0):
+    def __init__(
+        self,
+        rig_scene,
+        resolution,
+        projector_resolution,
+        *,
+        projector: str = "coaxial",
+        spp: int = 256,
+        ambient_spp: int = 4096,
+        truth_spp: int = 1024,
+        max_depth: int = 32,
+        materials=None,
+        cache_dir: Path | None = None,
+        progress=None,
+        seed: int = 0,
+    ):
         mi = mitsuba()
         self.rig_scene = rig_scene
         self.shape = (int(resolution[0]), int(resolution[1]))
@@ -120,8 +133,11 @@ class Renderer:
             cam = look_at(vs.camera, mirror=True)
             fov, axis = vs.camera.fov_deg, "y"
             power = rs.power if rs.power is not None else vs.projector_power
-            offset = None if vs.projector_offset is None else (look_at(vs.projector_offset, mirror=True),
-                                                               vs.projector_offset.fov_deg)
+            offset = (
+                None
+                if vs.projector_offset is None
+                else (look_at(vs.projector_offset, mirror=True), vs.projector_offset.fov_deg)
+            )
         else:
             loaded = mi.load_file(rs.scene, optimize=False)
             if not loaded.sensors():
@@ -147,8 +163,14 @@ class Renderer:
                 from devices.mitsuba.scene import look_at
 
                 offset = (look_at(rs.offset, mirror=False), float(rs.offset["fov_deg"]))
-        d["sensor"] = {"type": "perspective", "fov": float(fov), "fov_axis": axis, "to_world": cam,
-                       "film": film, "sampler": sampler}
+        d["sensor"] = {
+            "type": "perspective",
+            "fov": float(fov),
+            "fov_axis": axis,
+            "to_world": cam,
+            "film": film,
+            "sampler": sampler,
+        }
         if projector == "offset":
             if offset is None:
                 raise InputError(f"scene {rs.name!r} has no offset projector pose; use projector='coaxial'")
@@ -156,22 +178,39 @@ class Renderer:
         else:
             p_world, p_fov, p_axis = cam, fov, axis
         pattern = np.ones((hp, wp, 3), np.float32)
-        d["projector"] = {"type": "projector", "fov": float(p_fov), "fov_axis": p_axis, "to_world": p_world,
-                          "scale": 1.0,
-                          "irradiance": {"type": "bitmap", "bitmap": mi.Bitmap(pattern), "raw": True,
-                                         "filter_type": "nearest"}}
+        d["projector"] = {
+            "type": "projector",
+            "fov": float(p_fov),
+            "fov_axis": p_axis,
+            "to_world": p_world,
+            "scale": 1.0,
+            "irradiance": {"type": "bitmap", "bitmap": mi.Bitmap(pattern), "raw": True, "filter_type": "nearest"},
+        }
         return d, np.asarray(power, np.float64), offset is not None
 
     def _ambient_keys(self) -> list[str]:
         """Parameters that switch the scene's own emitters off (radiance, intensity, scale, weight)."""
         mi = mitsuba()
-        prefixes = [k[: -len(".sampling_weight")] for k in self.params.keys()
-                    if k.endswith(".sampling_weight") and isinstance(self.params.properties[k][2], mi.Emitter)
-                    and not k.startswith("projector.")]
+        prefixes = [
+            k[: -len(".sampling_weight")]
+            for k in self.params.keys()
+            if k.endswith(".sampling_weight")
+            and isinstance(self.params.properties[k][2], mi.Emitter)
+            and not k.startswith("projector.")
+        ]
         keys = []
         for p in prefixes:
-            mine = [k for k in self.params.keys() if k.startswith(p + ".")
-                    and (k.endswith(".value") or k.endswith(".scale") or k.endswith(".sampling_weight") or k.endswith(".data"))]
+            mine = [
+                k
+                for k in self.params.keys()
+                if k.startswith(p + ".")
+                and (
+                    k.endswith(".value")
+                    or k.endswith(".scale")
+                    or k.endswith(".sampling_weight")
+                    or k.endswith(".data")
+                )
+            ]
             if not any(not k.endswith(".sampling_weight") for k in mine):
                 raise InputError(f"emitter {p!r} has no radiance, intensity or scale parameter the rig can switch off")
             keys += mine
@@ -184,7 +223,10 @@ class Renderer:
     # --- lights ---------------------------------------------------------------------------
     def _set_lights(self, ambient: bool, emitted: np.ndarray | None) -> None:
         mi = mitsuba()
-        state = (bool(ambient), None if emitted is None else hashlib.sha1(np.ascontiguousarray(emitted).tobytes()).hexdigest())
+        state = (
+            bool(ambient),
+            None if emitted is None else hashlib.sha1(np.ascontiguousarray(emitted).tobytes()).hexdigest(),
+        )
         if state == self._lights:
             return
         for k in self._emitter_keys:
@@ -193,7 +235,9 @@ class Renderer:
         on = emitted is not None
         if on:
             e = np.asarray(emitted, np.float32)
-            self.params["projector.irradiance.data"] = mi.TensorXf(np.ascontiguousarray(e * self.power.astype(np.float32)))
+            self.params["projector.irradiance.data"] = mi.TensorXf(
+                np.ascontiguousarray(e * self.power.astype(np.float32))
+            )
         self.params["projector.scale"] = 1.0 if on else 0.0
         self.params["projector.sampling_weight"] = 1.0 if on else 0.0
         self.params.update()
@@ -205,8 +249,9 @@ class Renderer:
         done = 0
         while done < spp:
             n = min(CHUNK_SPP, spp - done)
-            img = np.asarray(mi.render(self.scene, spp=n, seed=(seed * 4099 + done) & 0xFFFFFFFF,
-                                       integrator=integrator), np.float64)
+            img = np.asarray(
+                mi.render(self.scene, spp=n, seed=(seed * 4099 + done) & 0xFFFFFFFF, integrator=integrator), np.float64
+            )
             out += img[..., :3] * n
             done += n
             if what:
@@ -218,8 +263,9 @@ class Renderer:
         self._seed += 1
         return self._seed
 
-    def render_lights(self, *, ambient: bool, emitted: np.ndarray | None, spp: int, seed: int, what: str = "",
-                      integrator=None) -> np.ndarray:
+    def render_lights(
+        self, *, ambient: bool, emitted: np.ndarray | None, spp: int, seed: int, what: str = "", integrator=None
+    ) -> np.ndarray:
         """One render of the scene under these lights (zeros if there is no light)."""
         if not ambient and (emitted is None or not np.any(emitted > 0)):
             return np.zeros(self.shape + (3,), np.float32)
@@ -233,8 +279,13 @@ class Renderer:
             path = self._cache_path()
             img = _load(path) if path is not None else None
             if img is None or img.shape != self.shape + (3,):
-                img = self.render_lights(ambient=True, emitted=None, spp=self.ambient_spp, seed=12345,
-                                         what=f"rendering the ambient light once ({self.ambient_spp} spp)")
+                img = self.render_lights(
+                    ambient=True,
+                    emitted=None,
+                    spp=self.ambient_spp,
+                    seed=12345,
+                    what=f"rendering the ambient light once ({self.ambient_spp} spp)",
+                )
                 if path is not None:
                     _save(path, img)
             self._ambient_image = img
@@ -244,9 +295,18 @@ class Renderer:
         if self._cache_dir is None:
             return None
         mi = mitsuba()
-        key = json.dumps({"scene": self.rig_scene.digest, "res": self.shape, "spp": self.ambient_spp,
-                          "depth": self.max_depth, "materials": self.materials, "version": MODEL_VERSION,
-                          "mitsuba": mi.__version__}, sort_keys=True)
+        key = json.dumps(
+            {
+                "scene": self.rig_scene.digest,
+                "res": self.shape,
+                "spp": self.ambient_spp,
+                "depth": self.max_depth,
+                "materials": self.materials,
+                "version": MODEL_VERSION,
+                "mitsuba": mi.__version__,
+            },
+            sort_keys=True,
+        )
         stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in self.rig_scene.name)[:64]
         return Path(self._cache_dir) / f"{stem}-ambient-{hashlib.sha256(key.encode()).hexdigest()[:24]}.npy"
 
@@ -294,9 +354,13 @@ class Renderer:
         changed = {}
         try:
             for sid, k in factors.items():
-                keys = [key for key in self.params.keys() if key.startswith(f"{sid}.bsdf.")
-                        and (key.endswith("reflectance.value") or key.endswith("reflectance.data"))
-                        and "specular_reflectance" not in key]
+                keys = [
+                    key
+                    for key in self.params.keys()
+                    if key.startswith(f"{sid}.bsdf.")
+                    and (key.endswith("reflectance.value") or key.endswith("reflectance.data"))
+                    and "specular_reflectance" not in key
+                ]
                 if not keys:
                     raise InputError(f"shape {sid!r} has no diffuse reflectance to scale")
                 for key in keys:
@@ -304,7 +368,9 @@ class Renderer:
                     changed[key] = type(old)(old)
                     arr = np.asarray(old, np.float64)
                     kk = np.asarray(k, np.float64)
-                    self.params[key] = type(old)((arr * kk).astype(np.float32)) if arr.ndim > 1 else type(old)(*(arr * kk))
+                    self.params[key] = (
+                        type(old)((arr * kk).astype(np.float32)) if arr.ndim > 1 else type(old)(*(arr * kk))
+                    )
             self.params.update()
             self._lights = None
             yield

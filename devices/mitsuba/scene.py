@@ -98,7 +98,9 @@ def load_rig_scene(name_or_path: str | Path) -> RigScene:
     else:
         path = RIG_DIR / f"{text}.json"
         if not path.is_file():
-            raise InputError(f"unknown mitsuba rig scene {text!r}; expected one of {rig_names()} or a path to a .json file")
+            raise InputError(
+                f"unknown mitsuba rig scene {text!r}; expected one of {rig_names()} or a path to a .json file"
+            )
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -111,7 +113,7 @@ def load_rig_scene(name_or_path: str | Path) -> RigScene:
     if unknown:
         raise InputError(f"unknown field(s) {unknown} in {path.name}; expected some of {sorted(_TOP_KEYS)}")
     if "scene" not in data or not isinstance(data["scene"], str) or not data["scene"]:
-        raise InputError(f"{path.name} must name its scene: \"scene\": \"virtual:NAME\" or a Mitsuba .xml file")
+        raise InputError(f'{path.name} must name its scene: "scene": "virtual:NAME" or a Mitsuba .xml file')
     scene = data["scene"]
     blobs = [json.dumps(data, sort_keys=True)]
     if scene.startswith("virtual:"):
@@ -146,10 +148,16 @@ def load_rig_scene(name_or_path: str | Path) -> RigScene:
         power = np.asarray(power, np.float64)
         if power.shape != (3,) or not np.all(np.isfinite(power)) or np.any(power <= 0):
             raise InputError(f"{path.name}: projector.power must be three positive numbers, got {proj['power']!r}")
-    return RigScene(name=str(data.get("name", path.stem)), description=str(data.get("description", "")),
-                    scene=scene, targets={str(k): list(v) for k, v in targets.items()},
-                    materials={str(k): dict(v) for k, v in materials.items()}, power=power,
-                    offset=proj.get("offset"), digest=hashlib.sha256("\n".join(blobs).encode()).hexdigest())
+    return RigScene(
+        name=str(data.get("name", path.stem)),
+        description=str(data.get("description", "")),
+        scene=scene,
+        targets={str(k): list(v) for k, v in targets.items()},
+        materials={str(k): dict(v) for k, v in materials.items()},
+        power=power,
+        offset=proj.get("offset"),
+        digest=hashlib.sha256("\n".join(blobs).encode()).hexdigest(),
+    )
 
 
 def check_coat(coat, where: str) -> dict:
@@ -158,8 +166,13 @@ def check_coat(coat, where: str) -> dict:
         raise InputError(f"{where} must be {{'specular': s, 'roughness': alpha}}, got {coat!r:.80}")
     s, r = coat["specular"], coat["roughness"]
     for name, v, lo_open in (("specular", s, False), ("roughness", r, True)):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) \
-                or not ((0 < v) if lo_open else (0 <= v)) or v > 1:
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float))
+            or not np.isfinite(v)
+            or not ((0 < v) if lo_open else (0 <= v))
+            or v > 1
+        ):
             raise InputError(f"{where}.{name} must be in {'(0' if lo_open else '[0'}, 1], got {v!r}")
     return {"specular": float(s), "roughness": float(r)}
 
@@ -195,17 +208,28 @@ def look_at(pose: dict | object, *, mirror: bool):
     import mitsuba as mi
 
     get = pose.get if isinstance(pose, dict) else lambda k, d=None: getattr(pose, k, d)
-    tw = mi.ScalarTransform4f().look_at(origin=[float(x) for x in get("position")],
-                                         target=[float(x) for x in get("look_at")],
-                                         up=[float(x) for x in get("up", (0, 1, 0))])
+    tw = mi.ScalarTransform4f().look_at(
+        origin=[float(x) for x in get("position")],
+        target=[float(x) for x in get("look_at")],
+        up=[float(x) for x in get("up", (0, 1, 0))],
+    )
     return tw @ _mirror() if mirror else tw
 
 
 def coated(diffuse: dict, coat: dict) -> dict:
     """A diffuse BSDF dict with a glossy coat (see the module docstring)."""
-    return {"type": "blendbsdf", "weight": float(coat["specular"]), "diffuse": diffuse,
-            "specular": {"type": "roughconductor", "distribution": "ggx", "alpha": float(coat["roughness"]),
-                         "material": "none", "specular_reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
+    return {
+        "type": "blendbsdf",
+        "weight": float(coat["specular"]),
+        "diffuse": diffuse,
+        "specular": {
+            "type": "roughconductor",
+            "distribution": "ggx",
+            "alpha": float(coat["roughness"]),
+            "material": "none",
+            "specular_reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+        },
+    }
 
 
 def _quad_transform(o, u, v):
@@ -232,8 +256,13 @@ def _reflectance(scene, q: int) -> dict:
     # texel centres in (a, b); Mitsuba's rectangle uv has v running against b (bitmap row 0 at b = 1)
     a, b = np.meshgrid((np.arange(wi) + 0.5) / wi, (np.arange(hi) + 0.5) / hi)
     rho = tex.sample(scene.albedo[q], a.ravel(), b.ravel()).reshape(hi, wi, 3)[::-1]
-    return {"type": "bitmap", "bitmap": mi.Bitmap(np.ascontiguousarray(rho, np.float32)), "raw": True,
-            "filter_type": "nearest", "wrap_mode": "clamp"}
+    return {
+        "type": "bitmap",
+        "bitmap": mi.Bitmap(np.ascontiguousarray(rho, np.float32)),
+        "raw": True,
+        "filter_type": "nearest",
+        "wrap_mode": "clamp",
+    }
 
 
 def virtual_scene_dict(scene, materials: dict) -> dict:
@@ -247,7 +276,10 @@ def virtual_scene_dict(scene, materials: dict) -> dict:
             bsdf = coated(bsdf, materials[sid])
         shape = {"type": "rectangle", "to_world": _quad_transform(q.origin[i], q.u[i], q.v[i]), "bsdf": bsdf}
         if np.any(scene.emission[i] > 0):
-            shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": [float(x) for x in scene.emission[i]]}}
+            shape["emitter"] = {
+                "type": "area",
+                "radiance": {"type": "rgb", "value": [float(x) for x in scene.emission[i]]},
+            }
         out[sid] = shape
     unknown = sorted(set(materials) - set(out))
     if unknown:

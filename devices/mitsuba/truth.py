@@ -15,7 +15,7 @@ import numpy as np
 from devices.mitsuba.render import TRUTH_SEEDS, Renderer, mitsuba
 from devices.virtual.camera import CameraModel
 from devices.virtual.projector import ProjectorModel, check_pattern
-from engine._checks import check_kappa, check_mask
+from engine.checks import check_kappa, check_mask
 from engine.errors import InputError
 
 
@@ -39,8 +39,9 @@ class Truth:
         Samples per pixel of every truth render.
     """
 
-    def __init__(self, renderer: Renderer, projector_model: ProjectorModel, camera_model: CameraModel,
-                 coverage: np.ndarray):
+    def __init__(
+        self, renderer: Renderer, projector_model: ProjectorModel, camera_model: CameraModel, coverage: np.ndarray
+    ):
         self._r = renderer
         self.projector_model = projector_model
         self.camera_model = camera_model
@@ -60,16 +61,20 @@ class Truth:
         if not isinstance(ambient, (bool, np.bool_)):
             raise InputError(f"ambient must be True or False, got {ambient!r}")
         self._calls += 1
-        return self._r.render_lights(ambient=bool(ambient), emitted=self._emitted(pattern), spp=self.spp,
-                                     seed=TRUTH_SEEDS + self._calls,
-                                     what=f"rendering ground truth ({self.spp} spp)")
+        return self._r.render_lights(
+            ambient=bool(ambient),
+            emitted=self._emitted(pattern),
+            spp=self.spp,
+            seed=TRUTH_SEEDS + self._calls,
+            what=f"rendering ground truth ({self.spp} spp)",
+        )
 
     def shapes_of(self, mask: np.ndarray) -> list[str]:
         """Shapes a camera mask stands for: those with at least half their visible footprint in it."""
         mask = check_mask("mask", mask, self.shape)
         seen = self._coverage.sum(axis=(1, 2))
         inside = (self._coverage * mask[None]).sum(axis=(1, 2))
-        return [sid for sid, s, i in zip(self.shape_ids, seen, inside) if s > 0 and i >= 0.5 * s]
+        return [sid for sid, s, i in zip(self.shape_ids, seen, inside, strict=True) if s > 0 and i >= 0.5 * s]
 
     def coverage(self, mask: np.ndarray) -> np.ndarray:
         """(H, W) float32 fraction of each pixel's footprint on the shapes ``mask`` stands for."""
@@ -127,8 +132,13 @@ class Truth:
         mi = mitsuba()
         self._calls += 1
         ones = np.ones(self._r.projector_resolution + (3,), np.float32)
-        d = self._r.render_lights(ambient=False, emitted=ones, spp=self.spp, seed=TRUTH_SEEDS + self._calls,
-                                  integrator=mi.load_dict({"type": "path", "max_depth": 2}))
+        d = self._r.render_lights(
+            ambient=False,
+            emitted=ones,
+            spp=self.spp,
+            seed=TRUTH_SEEDS + self._calls,
+            integrator=mi.load_dict({"type": "path", "max_depth": 2}),
+        )
         if mask is not None:
             mask = check_mask("mask", mask, self.shape)
             d = np.where(mask[..., None], d, 0).astype(np.float32)
@@ -149,5 +159,7 @@ class Truth:
         (hours at 64² and 1024 spp), and the vectorised variants crash on this machine's LLVM.
         The recolor truth (re-rendering with scaled reflectance) is exact without it.
         """
-        raise InputError("the mitsuba rig has no ground-truth interaction components (a per-sample Python "
-                         "integrator is too slow in scalar_rgb); compare recolored images with truth.recolor")
+        raise InputError(
+            "the mitsuba rig has no ground-truth interaction components (a per-sample Python "
+            "integrator is too slow in scalar_rgb); compare recolored images with truth.recolor"
+        )

@@ -136,7 +136,8 @@ def test_any_mitsuba_xml_scene_with_a_targets_file(tmp_path):
   <sensor type="perspective"><float name="fov" value="50"/>
     <transform name="to_world"><lookat origin="0,0,-3" target="0,0,0" up="0,1,0"/></transform></sensor>
   <shape type="rectangle" id="wall"><bsdf type="diffuse"><rgb name="reflectance" value="0.2,0.6,0.3"/></bsdf></shape>
-  <shape type="rectangle" id="floor"><transform name="to_world"><rotate x="1" angle="-90"/><translate y="-1" z="-1"/></transform>
+  <shape type="rectangle" id="floor">
+    <transform name="to_world"><rotate x="1" angle="-90"/><translate y="-1" z="-1"/></transform>
     <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf></shape>
   <emitter type="point"><point name="position" x="0" y="2" z="-2"/><rgb name="intensity" value="5"/></emitter>
 </scene>""")

@@ -29,8 +29,9 @@ def test_supersampled_pixels_average_their_footprint(cache):
     mixed = (cov > 0) & (cov < 1)
     assert mixed.any() and len(coarse.setup.sub_pixel) > mixed.sum()
     # coverage is the fraction of the footprint on the wall: the fine rig's centres, area-averaged
-    np.testing.assert_allclose(cov, _area_average(fine.targets["right_wall"][..., None].astype(float), 4)[..., 0],
-                               atol=0.13)
+    np.testing.assert_allclose(
+        cov, _area_average(fine.targets["right_wall"][..., None].astype(float), 4)[..., 0], atol=0.13
+    )
     # direct light of a mixed pixel is the mean over its footprint
     d_coarse, d_fine = coarse.truth.direct(), _area_average(fine.truth.direct(), 4)
     rel = np.abs(d_coarse - d_fine).sum(-1) / np.maximum(d_fine.sum(-1), 1e-6)
@@ -96,8 +97,9 @@ def test_textured_albedo_on_a_quad(tmp_path, cache):
     scene = load_scene(path)
     a = np.array([0.1, 0.3, 0.1])
     b = np.array([0.1, 0.1, 0.5])
-    np.testing.assert_allclose(scene.albedo_at(np.array([1, 1, 1]), a, b),
-                               [[0.4, 0.7, 0.8], [0.2, 0.2, 0.7], [0.2, 0.2, 0.7]])
+    np.testing.assert_allclose(
+        scene.albedo_at(np.array([1, 1, 1]), a, b), [[0.4, 0.7, 0.8], [0.2, 0.2, 0.7], [0.2, 0.2, 0.7]]
+    )
     rig = open_rig(str(path), ideal=True, resolution=(32, 32), supersample=2, cache_dir=cache, patch_size=0.3)
     albedo = rig.truth.albedo()[rig.targets["right"]]
     assert np.isclose(albedo, [0.2, 0.2, 0.7], atol=1e-6).all(axis=-1).any()

@@ -10,7 +10,7 @@ from engine.edge import blend_edges, check_coverage, edge, refine_mask, solid
 from engine.errors import InputError
 from engine.recolor import recolor
 
-A = np.array([0.1, 0.8, 0.1], np.float32)   # target colour
+A = np.array([0.1, 0.8, 0.1], np.float32)  # target colour
 B = np.array([0.7, 0.65, 0.6], np.float32)  # neighbour colour
 
 
@@ -56,7 +56,7 @@ def _decomposition(order=3, h=12, w=14):
     """Two flat sides with known interaction shares, and an edge column mixing them."""
     alpha, photo = _two_sides(h, w)
     s_in = np.array([0.7, 0.2, 0.1])[:order] / np.array([0.7, 0.2, 0.1])[:order].sum()
-    s_out = np.array([0.6, 0.3, 0.1])[: order] / np.array([0.6, 0.3, 0.1])[:order].sum()  # [L̄_d, C R^0, C R^1]
+    s_out = np.array([0.6, 0.3, 0.1])[:order] / np.array([0.6, 0.3, 0.1])[:order].sum()  # [L̄_d, C R^0, C R^1]
     target = alpha >= 1
     comps = np.zeros((order, h, w, 3), np.float32)
     unreached = np.zeros((h, w, 3), np.float32)

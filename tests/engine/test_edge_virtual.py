@@ -14,8 +14,13 @@ KAPPA = np.array([0.5, 1.2, 0.8])
 
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory):
-    rig = devices.open_rig("virtual:cornell", ideal=True, resolution=(40, 40), supersample=4,
-                           cache_dir=tmp_path_factory.mktemp("edge-cache"))
+    rig = devices.open_rig(
+        "virtual:cornell",
+        ideal=True,
+        resolution=(40, 40),
+        supersample=4,
+        cache_dir=tmp_path_factory.mktemp("edge-cache"),
+    )
     rec = Recorder(rig, None)
     cal = calibrate_rig(rec, rig_name=rig.identity)
     truth = rig.truth.recolor([(rig.targets["right_wall"], KAPPA)])
