@@ -114,7 +114,7 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
             e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
             rows.append(
                 (
-                    tuple(np.round(kappa, 3)),
+                    ",".join(f"{x:g}" for x in kappa),
                     label + (f" (denoise {denoise})" if denoise and label != "naive per-pixel" else ""),
                     e_wall,
                     e_in,
@@ -182,8 +182,8 @@ def part_virtual(args):
 
 def part_fig13(args):
     res, spp = (24, 64) if args.quick else (32, 256)
-    shares = [0.0, 0.1] if args.quick else [0.0, 0.01, 0.03, 0.1, 0.3]
-    rough = [0.1] if args.quick else [0.009, 0.03, 0.1, 0.3, 1.0]
+    shares = [0.0, 0.1] if args.quick else [0.0, 0.03, 0.1, 0.3]
+    rough = [0.1] if args.quick else [0.009, 0.05, 0.3, 1.0]
     kappa = np.array([1.5, 4.5, 0.5])
     print(f"\n== Fig. 13: mitsuba:wedge {res}², {spp} spp, left wall glossy, κ = {kappa.tolist()}, order 4 ==")
     print("relative error of the recolored image (ours / naive), rows: specular share, columns: GGX roughness")
@@ -215,7 +215,7 @@ def part_fig13(args):
 
 
 def part_fig3(args):
-    res, spp = (32, 128) if args.quick else (64, 1024)
+    res, spp = (32, 128) if args.quick else (48, 1024)
     kappa = np.array([1.3, 0.6, 0.2])
     print(f"\n== Figs. 3/11: mitsuba:floor {res}², {spp} spp, box on a glossy floor, κ = {kappa.tolist()}, order 3 ==")
     rig = devices.open_rig("mitsuba:floor", ideal=True, resolution=(res, res), spp=spp, truth_spp=spp)
@@ -224,7 +224,6 @@ def part_fig3(args):
     exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
     truth, truth2 = exp.truth(kappa), exp.truth(kappa)
     photo = exp.photograph()
-    floor_px = rig.coverage.get("floor") if "floor" in rig.coverage else None
     box = exp.coverage > 0
     change = np.abs(truth - rig.truth.photograph(ambient=exp.ambient, pattern=exp.flood)).sum(-1)
     reflection = ~box & (change > 0.05 * np.maximum(photo.sum(-1), 1e-6)) & (np.arange(res)[:, None] > res // 2)
@@ -246,7 +245,6 @@ def part_fig3(args):
             f"{100 * relative_error(img, truth, reflection):9.2f}%",
             flush=True,
         )
-    del floor_px
     rig.close()
 
 
@@ -259,7 +257,7 @@ def part_fig12(args):
             exp = Experiment(rig, "checker_wall", 4)
             label = f"virtual:textured {res}², supersampled 4×4"
         else:
-            res, spp = (32, 128) if args.quick else (64, 1024)
+            res, spp = (32, 128) if args.quick else (48, 1024)
             rig = devices.open_rig(
                 "mitsuba:textured", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp, truth_spp=spp
             )
