@@ -164,7 +164,8 @@ def open_rig(arg: str, **options) -> VirtualRig:
     if isinstance(sub, bool) or not isinstance(sub, (int, np.integer)) or not 1 <= sub <= 16:
         raise InputError(f"supersample must be an integer in [1, 16] (sub-samples per pixel edge), got {sub!r}")
     defocus = options.get("defocus", 0.0)
-    if isinstance(defocus, bool) or not isinstance(defocus, (int, float)) or not np.isfinite(defocus) or not 0 <= defocus <= 64:
+    if (isinstance(defocus, bool) or not isinstance(defocus, (int, float)) or not np.isfinite(defocus)
+            or not 0 <= defocus <= 64):
         raise InputError(f"defocus must be a blur in [0, 64] projector pixels, got {defocus!r}")
     patch = options.get("patch_size", None)
     if patch is None:
@@ -179,7 +180,8 @@ def open_rig(arg: str, **options) -> VirtualRig:
     elif not isinstance(cache, (str, os.PathLike)):
         raise InputError(f"cache_dir must be a path, None or False, got {cache!r}")
 
-    setup = load_or_build(scene, Geometry(res, kind, pres, float(patch), int(sub)), None if cache is None else Path(cache),
+    geometry = Geometry(res, kind, pres, float(patch), int(sub))
+    setup = load_or_build(scene, geometry, None if cache is None else Path(cache),
                           progress=options.get("progress"))
     renderer = Renderer(scene, setup, defocus=float(defocus))
     renderer.ambient = ambient

@@ -350,7 +350,8 @@ def _texture(value, where: str, base_dir: Path) -> tuple[Texture, str]:
 
         img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED) if path.is_file() else None
         if img is None:
-            raise InputError(f"{where}.image: cannot read image {str(path)!r} (a PNG or TIFF file, relative to the scene file)")
+            raise InputError(f"{where}.image: cannot read image {str(path)!r} "
+                             "(a PNG or TIFF file, relative to the scene file)")
         if img.dtype not in (np.uint8, np.uint16):
             raise InputError(f"{where}.image must be an 8- or 16-bit image, got {img.dtype}")
         top = float(np.iinfo(img.dtype).max)

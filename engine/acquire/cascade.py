@@ -236,7 +236,8 @@ def acquire_cascade(
         m = np.asarray(m)
         total += m if m.dtype.kind == "f" else m.astype(bool)
     if (total > 1 + 1e-6).any():
-        raise InputError("targets overlap: a pixel may belong to one target only (soft masks: coverages may not sum past 1)")
+        raise InputError("targets overlap: a pixel may belong to one target only "
+                         "(soft masks: coverages may not sum past 1)")
     rig = recorder.rig
     identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
