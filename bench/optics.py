@@ -154,10 +154,12 @@ def part_cornell(args):
     err = np.abs(soft - exp.coverage)[(exp.coverage > 0) & (exp.coverage < 1)]
     print(f"refined coverage vs true coverage on edge pixels: mean |error| {err.mean():.3f}")
     variants = [("previous (hard mask)", "hard"), ("soft mask, refined", "soft")]
+    lamp = rig.truth.emitters()
+    edge_table(exp, variants, [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     if not args.quick:
         exp.acquire("true", exp.coverage)
-        variants.append(("soft mask, true coverage", "true"))
-    edge_table(exp, variants, [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=rig.truth.emitters())
+        edge_table(exp, [("soft mask, true coverage", "true")], [K1, K2],
+                   denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     rig.close()
 
 

@@ -194,10 +194,11 @@ def blend_edges(
     with ``L̄_d = R^0 L_d`` and ``C R^m L_d = R^{m+1} L_d``. So an edge pixel's non-target
     decomposition ``F = (L̄_d, C R^0 L_d, …)`` is the sum of its target part's components
     (shifted) and its neighbour's. The neighbour's part is
-    ``(1 − w) I s_N``, with ``s_N`` the mean shares ``(L̄_d, C R^i L_d) / I`` of the outside
+    ``(1 − w) I s_N``, with ``s_N`` the mean shares ``(L̄_d, C R^i L_d) / I`` of the lit outside
     pixels (coverage 0) in the window, renormalised to sum to 1, and ``w`` the target's share
     of the pixel's light from the coverage and the two sides' mean radiances ``Ī_A``,
-    ``Ī_N``: ``w = α Ī_A / (α Ī_A + (1 − α) Ī_N)`` per channel; the target part is the rest
+    ``Ī_N`` (dark outside pixels count: against the void, ``w = 1``):
+    ``w = α Ī_A / (α Ī_A + (1 − α) Ī_N)`` per channel; the target part is the rest
     of ``F`` (clipped at 0). ``F`` is first scaled to sum to ``I``, so κ = 1 gives ``I``
     exactly. Recoloring multiplies the target part's ``L̄_d`` by κ and its ``C R^m L_d``
     by ``κ^{m+2}``, the neighbour's as Eq. 4. The target part's K-th interaction (beyond the
@@ -212,18 +213,31 @@ def blend_edges(
         raise InputError(f"photograph must have the decomposition's shape {(h, w, c)}, got {photo.shape}")
     if int(radius) < 1:
         raise InputError(f"radius must be >= 1 pixel, got {radius!r}")
-    mixed = edge(cov) & ~decomposition.target
+    todo = edge(cov) & ~decomposition.target
+    blended = np.zeros((h, w), bool)
+    # edge pixels with no solid or no outside pixel that close (slivers) try a wider window
+    for r in (int(radius), 3 * int(radius)):
+        if not (todo & ~blended).any() or k < 2:
+            break
+        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended)
+        blended |= done
+    return decomposition, blended
+
+
+def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Decomposition, np.ndarray]:
+    """:func:`blend_edges` of the pixels ``mixed`` with a ``(2r+1)²`` window."""
+    k, h, w, c = decomposition.components.shape
     none = np.zeros((h, w), bool)
-    if not mixed.any() or k < 2:
-        return decomposition, none
-    r = int(radius)
     ys, xs = np.nonzero(mixed)
     rows = slice(max(ys.min() - r, 0), min(ys.max() + r + 1, h))
     cols = slice(max(xs.min() - r, 0), min(xs.max() + r + 1, w))
     light = photo[rows, cols].astype(np.float32)
     positive = (light > 0).all(axis=-1)
     inside = decomposition.target[rows, cols] & positive
-    outside = (cov[rows, cols] <= 0) & ~decomposition.target[rows, cols] & positive
+    # the neighbour's radiance counts dark pixels too (a target against the void has none);
+    # its shares need light to be measured
+    around = (cov[rows, cols] <= 0) & ~decomposition.target[rows, cols]
+    outside = around & positive
     size = (2 * r + 1,) * 2
 
     def box(x):
@@ -231,8 +245,8 @@ def blend_edges(
             np.ascontiguousarray(x, np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT
         )
 
-    n_in, n_out = box(inside), box(outside)
-    sel = mixed[rows, cols] & (n_in > 0.5) & (n_out > 0.5)
+    n_in, n_around = box(inside), box(around)
+    sel = mixed[rows, cols] & (n_in > 0.5) & (n_around > 0.5)
     if not sel.any():
         return decomposition, none
     vy, vx = np.nonzero(sel)
@@ -246,7 +260,7 @@ def blend_edges(
         s_out[j] = box(np.where(outside[:, :, None], part / safe, 0))[vy, vx]
     s_out /= np.maximum(s_out.sum(axis=0), 1e-30)
     i_in = box(np.where(inside[:, :, None], light, 0))[vy, vx] / n_in[vy, vx, None]
-    i_out = box(np.where(outside[:, :, None], light, 0))[vy, vx] / n_out[vy, vx, None]
+    i_out = box(np.where(around[:, :, None], light, 0))[vy, vx] / n_around[vy, vx, None]
     alpha = cov[rows, cols][vy, vx][:, None]
     num = alpha * i_in
     wgt = num / np.maximum(num + (1 - alpha) * i_out, 1e-30)
