@@ -12,7 +12,7 @@ target or as non-target leaves a seam along every edge. Here the target is a *so
   part — measured by the re-emissions around it, one interaction late — and the neighbour's,
   recolored with the interaction shares of nearby outside pixels (as :mod:`engine.fill` does
   for unreachable pixels): :func:`blend_edges`;
-* a soft mask comes from a feathered brush, or from the artist's hard mask refined along the
+* a soft mask comes from the rig's true coverage, or from the artist's hard mask refined along the
   photograph's edges (:func:`refine_mask`: the compositing equation ``I = α A + (1 − α) B``
   solved per pixel with the two sides' colours extrapolated from nearby pixels).
 

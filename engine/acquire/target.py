@@ -146,6 +146,11 @@ def prepare_target(
         to the correspondence) is below this fraction of its correspondence-free
         ``max − min`` has a wrong correspondence (lit and unlit captures got mixed) and is
         unreachable. Noise biases ``max − min`` up by about 2σ, hence the margin.
+    margin : int
+        Projector pixels this close to one decoded by a non-solid camera pixel are not
+        emitted either (the projector footprint must be wholly on the target: use the
+        projector's blur radius when it is defocused). Edge pixels the Gray code could not
+        decode claim no projector pixel.
 
     Returns
     -------

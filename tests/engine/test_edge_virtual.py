@@ -58,3 +58,21 @@ def test_refined_mask_beats_the_hard_mask_it_came_from(bench):
     cov = rig.coverage["right_wall"]
     mixed = (cov > 0) & (cov < 1)
     assert np.abs(soft - cov)[mixed].mean() < np.abs(hard_mask - cov)[mixed].mean()
+
+
+def test_margin_keeps_emission_off_projector_pixels_next_to_the_edge(bench):
+    import cv2
+
+    from engine.acquire import prepare_target
+
+    rig, rec, cal, _ = bench
+    cov = rig.coverage["right_wall"]
+    base = rec.capture("black", rec.black())
+    tight = prepare_target(rec, cal, cov, base, name="m0")
+    wide = prepare_target(rec, cal, cov, base, name="m1", margin=1)
+    assert (wide.mask & ~tight.mask).sum() == 0 and wide.mask.sum() < tight.mask.sum()
+    # co-axial, equal resolutions: the margin drops pixels next to the edge (and next to
+    # projector pixels that interreflections made a non-target pixel decode wrongly)
+    near_edge = cv2.dilate((cov < 1).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    assert (tight.mask & ~wide.mask & near_edge).sum() > 0.5 * (tight.mask & ~wide.mask).sum()
+    assert (wide.unreachable == (cov >= 1) & ~wide.mask).all()
