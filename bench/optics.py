@@ -183,7 +183,7 @@ def part_virtual(args):
 
 
 def part_fig13(args):
-    res, spp = (24, 64) if args.quick else (32, 256)
+    res, spp = (24, 64) if args.quick else (24, 128)
     shares = [0.0, 0.1] if args.quick else [0.0, 0.03, 0.1, 0.3]
     rough = [0.1] if args.quick else [0.009, 0.05, 0.3, 1.0]
     kappa = np.array([1.5, 4.5, 0.5])
