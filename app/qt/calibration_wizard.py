@@ -270,8 +270,8 @@ class ProjectorPage(QWizardPage):
             self.screens.hide()
         elif backend in _NO_SCREEN_BACKENDS:
             self.note.setText(
-                "The simulated rig renders its projector (its pose is chosen on the first page): there is no "
-                "screen to choose." if backend in ("virtual", "mitsuba") else
+                f"The {'virtual' if backend == 'virtual' else 'path-traced'} rig simulates its projector (its pose "
+                "is chosen on the first page): there is no screen to choose." if backend in ("virtual", "mitsuba") else
                 "A replay rig serves recorded captures back: it has no projector screen.")
             self.screens.hide()
         else:
