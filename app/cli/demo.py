@@ -17,16 +17,23 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import kappa, resolution
+from app.cli._args import frames, kappa, order, radius, resolution
 from app.cli.main import ProgressBar
+from app.model.files import export_image, open_document
 from engine.acquire import Adaptive
 from engine.acquire.predict import relative_error
-from engine.denoise import denoise_components
 from engine.errors import InputError
 from engine.imageio import to_display, write_image
 from engine.recolor import recolor
 from engine.session import Session
-from engine.workflow import estimated_report, load_decomposition, run_calibration, run_capture
+from engine.workflow import (
+    edit_from_plan,
+    estimated_report,
+    load_decomposition,
+    run_calibration,
+    run_capture,
+    save_edit,
+)
 
 
 def add_arguments(parser) -> None:
@@ -38,17 +45,17 @@ def add_arguments(parser) -> None:
                         help="mitsuba rig: samples per pixel of each capture's render (default %(default)s)")
     parser.add_argument("--target", default="right_wall", help="scene target to recolor (default %(default)s)")
     parser.add_argument("--kappa", type=kappa, default=kappa("2,0.125,8"), metavar="R,G,B", help="albedo scale (default 2,0.125,8)")
-    parser.add_argument("--order", type=int, default=4, help="decomposition order K (default %(default)s)")
+    parser.add_argument("--order", type=order, default=4, help="decomposition order K (default %(default)s)")
     parser.add_argument("--resolution", type=resolution, default=None,
                         help="camera resolution (default 128, 64 on the mitsuba rig)")
     parser.add_argument("--ideal", action="store_true", help="an ideal rig (no noise, linear projector)")
     parser.add_argument("--projector", choices=("coaxial", "offset"), default="coaxial",
                         help="projector pose: co-axial with the camera, or the scene's offset pose (default %(default)s)")
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute")
-    parser.add_argument("--frames", type=int, default=None,
+    parser.add_argument("--frames", type=frames, default=None,
                         help="frames averaged per capture (default 16: κ = 8 amplifies noise 8^i at order i; "
                              "1 on the mitsuba rig, where each frame is a render)")
-    parser.add_argument("--denoise", type=int, default=4, metavar="RADIUS",
+    parser.add_argument("--denoise", type=radius, default=4, metavar="RADIUS",
                         help="guided-filter radius for the interaction components, 0 = off (default %(default)s)")
     parser.add_argument("--fresh", action="store_true", help="delete the output folder's session first")
 
@@ -108,22 +115,21 @@ def run(args) -> int:
         truth = rig.truth.recolor([(mask, args.kappa)])
         photo = rig.truth.photograph()
         surfaces = ~rig.truth.emitters()  # the lamp dwarfs every surface: score without it too
-    d = load_decomposition(session)
+    d = result.decomposition
     raw_rel = relative_error(recolor(d, args.kappa), truth)
     if args.denoise > 0:
-        d = denoise_components(d, result.acquisition.observations[0], radius=args.denoise)
+        d = load_decomposition(session, result.key, denoise=args.denoise)
     ours = recolor(d, args.kappa)
     rel, rel_surfaces = relative_error(ours, truth), relative_error(ours, truth, surfaces)
     naive = np.where(mask[:, :, None], photo * args.kappa.astype(np.float32), photo)
     naive_rel, naive_surfaces = relative_error(naive, truth), relative_error(naive, truth, surfaces)
-    edit = {"rig": name, "target": args.target, "kappa": args.kappa.tolist(), "order": args.order, "denoise": args.denoise}
-    write_image(out / "recolored.exr", ours, metadata={"albedit.edit": edit})
+    save_edit(session, edit_from_plan(session, args.kappa, denoise=args.denoise))
+    export_image(open_document(session_path)[0], out / "recolored.exr", dtype="float")  # the edit in its metadata
     write_image(out / "recolored.png", to_display(ours))
     write_image(out / "photograph.png", to_display(photo))
     write_image(out / "truth.png", to_display(truth))
     err_img, scale = error_image(ours, truth)
     write_image(out / "error.png", err_img)
-    session.update(edit={"kappa": args.kappa.tolist()})
     estimated = estimated_report(session)
     estimated += "\n" if estimated else ""
     print(

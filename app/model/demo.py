@@ -63,7 +63,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
     """
     from devices import open_rig  # the app sits above devices; imported late to keep start-up light
     from engine.session import Session
-    from engine.workflow import load_decomposition, run_calibration, run_capture
+    from engine.workflow import run_calibration, run_capture
 
     rig_options.setdefault("ideal", True)
     report(progress, 0, 1, f"opening {rig_name}")
@@ -85,14 +85,13 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         name = DEMO_TARGET if DEMO_TARGET in targets else next(iter(targets))
         result = run_capture(rig, session, [(name, targets[name])], DEMO_ORDER,
                              progress=_stage(progress, f"acquiring {name!r}"), should_stop=should_stop)
-        decomposition = load_decomposition(session)
         photo = np.ascontiguousarray(result.acquisition.observations[0], np.float32)
         doc = Document(photo, unreachable=unreachable_pixels(calibration), source=rig_name, truth=rig.truth)
         for other, mask in targets.items():  # the acquired target last: the end of its cascade
             if other != name:
                 doc.add_target(other, mask)
         t = doc.add_target(name, targets[name])
-        doc.set_acquisition([t.uid], decomposition, key=_cache_key(session))
+        doc.set_acquisition([t.uid], result.decomposition, key=result.key)
         doc.set_kappa(t.uid, DEMO_KAPPA)
         _finish(doc)
         report(progress, 1, 1, "ready")
@@ -100,12 +99,6 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
     except BaseException:
         rig.close()
         raise
-
-
-def _cache_key(session) -> str:
-    from engine.workflow import plan_key
-
-    return plan_key(session)
 
 
 def _finish(doc: Document) -> None:

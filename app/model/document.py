@@ -22,6 +22,7 @@ from psygnal import Signal, SignalGroup
 from app.model.history import History
 from engine.checks import check_float_image, check_kappa, check_mask
 from engine.errors import InputError
+from engine.workflow import check_targets
 
 #: Slider range of κ (log scale), as in the issue: 1/16 … 16.
 KAPPA_MIN = 1.0 / 16.0
@@ -234,19 +235,8 @@ class Document:
             The cascade to acquire, first to last; default every target in order.
         """
         uids = [t.uid for t in self.targets] if uids is None else list(uids)
-        if not uids:
-            raise InputError("no target to acquire: add a target and paint it first")
-        for u in uids:
-            t = self.target(u)
-            if not t.mask.any():
-                raise InputError(f"target {t.name!r} is empty: paint it before acquiring")
-        conflicts = {n: c for n, c in self.unreachable_conflicts().items() if self.by_name(n).uid in uids}
-        if conflicts:
-            listed = ", ".join(f"{n!r}: {c} px" for n, c in conflicts.items())
-            raise InputError(
-                f"targets cover pixels the projector cannot reach ({listed}); their light cannot be "
-                "re-emitted. Erase them (shown hatched) before acquiring."
-            )
+        check_targets([(self.target(u).name, self.target(u).mask) for u in uids], self.shape,
+                      unreachable=self.unreachable)
 
     # ----------------------------------------------------------------- target list
     def add_target(self, name: str | None = None, mask=None, *, kappa=1.0, index: int | None = None) -> Target:

@@ -35,7 +35,7 @@ from engine.acquire import Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
 from engine.progress import checkpoint
-from engine.workflow import estimated_report, load_calibration, run_capture
+from engine.workflow import Unreachable, estimated_report, preflight, run_capture
 
 __all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
 
@@ -254,15 +254,6 @@ class AcquisitionPanel(QWidget):
         policy = POLICIES[self.policy.currentIndex()][1]
         return None if policy == "brute" else Adaptive(policy, self.threshold.value() / 100.0)
 
-    def _plan(self) -> dict:
-        """The plan :func:`run_capture` will store (compared with the session's before a run)."""
-        from engine.workflow import capture_plan
-
-        return capture_plan(
-            self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
-            settings=self.capture_settings(), adaptive=self.adaptive(),
-        )
-
     def _plan_captures(self) -> list[str]:
         if self.session is None:
             return []
@@ -281,45 +272,13 @@ class AcquisitionPanel(QWidget):
         if self.session is None:
             return "No session: calibrate the rig into a session first (Calibrate the rig…).", [], {}
         try:
-            calibration = load_calibration(self.session)
-            calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
-                                         tuple(self.rig.projector.resolution))
+            checked = preflight(
+                self.rig, self.session, self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
+                settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
+                unreachable=Unreachable.LEAVE_OUT if self.leave_out.isChecked() else Unreachable.REFUSE)
         except (SessionError, InputError) as exc:
-            return f"{exc}. Calibrate the rig into this session first (Calibrate the rig…).", [], {}
-        if not self.targets:
-            return "There is no target to acquire: paint one first.", [], {}
-        if len(self.fixed_kappa) != len(self.targets) - 1:
-            return (f"A cascade of {len(self.targets)} targets needs the fixed κ of the first "
-                    f"{len(self.targets) - 1}, got {len(self.fixed_kappa)}."), [], {}
-        targets, left_out = [], {}
-        for name, mask in self.targets:
-            if mask.shape != calibration.camera_resolution:
-                return (f"Target {name!r} is {mask.shape[1]}×{mask.shape[0]} pixels but the camera is "
-                        f"{calibration.camera_resolution[1]}×{calibration.camera_resolution[0]}."), [], {}
-            if not mask.any():
-                return f"Target {name!r} is empty: paint it first.", [], {}
-            bad = unreachable_pixels(calibration, mask)
-            if bad.any() and (not self.leave_out.isChecked() or bad.sum() == mask.sum()):
-                counts = calibration.correspondence.counts(bad)
-                why = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if n and k != "decoded")
-                return (f"Target {name!r}: {int(bad.sum())} of {int(mask.sum())} painted pixels cannot be reached "
-                        f"by the projector ({why}). Erase them from the target (the calibration's coverage map "
-                        "shows where the projector reaches), or move the projector and recalibrate."), [], {}
-            if bad.any():
-                left_out[name] = int(bad.sum())
-                mask = mask & ~bad
-            targets.append((name, mask))
-        previous = self.session.state.get("plan")
-        if previous is not None:
-            if previous != self._plan():
-                return (f"This session already holds a different acquisition plan (targets "
-                        f"{previous.get('targets')}, order {previous.get('order')}): set the same controls to "
-                        "resume it, or acquire into a new session folder."), [], {}
-            for name, mask in targets:
-                if name in self.session.masks and not np.array_equal(self.session.read_mask(name), mask):
-                    return (f"Target {name!r} was painted differently when this session's acquisition began: "
-                            "acquire the new mask into a new session folder."), [], {}
-        return "", targets, left_out
+            return str(exc), [], {}
+        return "", checked.targets, checked.left_out
 
     # ------------------------------------------------------------------ run
     def start(self) -> Job | None:

@@ -60,7 +60,14 @@ from engine.calibrate import AutoExposure, exposure_report, projector_lit
 from engine.errors import DeviceError, InputError, SessionError
 from engine.progress import checkpoint
 from engine.session import Session
-from engine.workflow import load_calibration, open_session_for_rig, run_calibration, save_calibration
+from engine.workflow import (
+    adopt_calibration,
+    calibration_problems,
+    load_calibration,
+    load_compatible_calibration,
+    open_session_for_rig,
+    run_calibration,
+)
 
 __all__ = ["CalibrationWizard"]
 
@@ -277,15 +284,13 @@ class ProjectorPage(QWizardPage):
         else:
             self.screens.show()
             try:
-                from devices.qtscreen import list_screens
-
-                found = list_screens()
+                found = [a for a in devices.available_projectors() if a.ok]
             except Exception as exc:  # noqa: BLE001 - shown, the rig then opens with its default
                 found = []
                 self.note.setText(_red(f"Cannot list screens ({_error_text(exc)}); the rig opens with its default projector."))
-            for s in found:
-                item = QListWidgetItem(str(s))
-                item.setData(Qt.ItemDataRole.UserRole, s.index)
+            for a in found:  # "qtscreen:1 — HDMI-1 1024x768": every projector a registered backend offers
+                item = QListWidgetItem(f"{a.name} — {a.reason}" if a.reason else a.name)
+                item.setData(Qt.ItemDataRole.UserRole, a.name)
                 self.screens.addItem(item)
             if found:
                 self.note.setText("The projector is a full-screen window on one of these screens (usually not the primary):")
@@ -295,7 +300,7 @@ class ProjectorPage(QWizardPage):
         item = self.screens.currentItem()
         if self.screens.isHidden() or item is None:
             return {}
-        return {"projector": f"qtscreen:{item.data(Qt.ItemDataRole.UserRole)}"}
+        return {"projector": item.data(Qt.ItemDataRole.UserRole)}
 
     def isComplete(self) -> bool:  # noqa: N802 (Qt name)
         return not self.w.busy
@@ -950,15 +955,8 @@ class CalibrationWizard(QWizard):
         if not path:
             return False, "Choose a calibrated session folder first."
         try:
-            calibration = load_calibration(Session.open(path))
-            calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
-                                         tuple(self.rig.projector.resolution))
-            mine = self.session.read_calibration()[0]
-            if mine and mine != calibration.to_dict()[0]:
-                raise SessionError(f"session {self.session.path} already has a different calibration; "
-                                   "use a new session folder")
-            if not mine:
-                save_calibration(self.session, calibration)
+            calibration = load_compatible_calibration(path, self.rig)
+            adopt_calibration(self.session, calibration)
         except Exception as exc:  # noqa: BLE001 - the refusal is shown in the engine's words
             return False, f"Refused: {_error_text(exc)}"
         self.calibration, self.failure = calibration, None
@@ -971,25 +969,8 @@ class CalibrationWizard(QWizard):
         out = []
         if self.failure is not None:
             out.append((_error_text(self.failure), _fix_for(self.failure)))
-        cal = self.calibration
-        if cal is not None:
-            counts = cal.correspondence.counts()
-            total = max(sum(counts.values()), 1)
-            if counts["decoded"] < 0.98 * total:
-                fixes = ["targets can only be edited where the projector reaches: keep them on the green "
-                         "pixels of the coverage map"]
-                if counts["unlit"]:
-                    fixes.append("unlit pixels are in the projector's shadow: targets there cannot be edited; "
-                                 "place the projector closer to the camera's viewpoint")
-                if counts["low_contrast"]:
-                    fixes.append("low contrast: focus the projector, lengthen the exposure, darken the room")
-                if counts["out_of_range"]:
-                    fixes.append("out of range codes come from noise or strong indirect light: darken the room")
-                out.append((cal.correspondence.summary(), "; ".join(fixes) + "."))
-            exposure = str(cal.metadata.get("exposure", ""))
-            if exposure and not exposure.startswith("ok"):
-                out.append((f"Exposure: {exposure}", "Go back to the exposure page, adjust, and calibrate into a "
-                            "new session folder."))
+        if self.calibration is not None:
+            out += calibration_problems(self.calibration)
         return out
 
     def summary_html(self) -> str:

@@ -39,6 +39,7 @@ from app.qt.preview import PreviewController
 from app.qt.undo import QtHistory
 from app.qt.worker import Job
 from engine.errors import InputError
+from engine.imageio import RAW_EXTENSIONS
 from engine.progress import checkpoint
 from engine.session import Session
 
@@ -338,11 +339,13 @@ class MainWindow(QMainWindow):
 
     # ================================================================== document
     def set_document(self, document: Document, session=None, *, rig=None, scratch: Path | None = None) -> None:
-        """Show ``document`` (replacing the current one, whose rig is closed).
+        """Show ``document`` (replacing the current one, whose rig is closed unless it is ``rig``).
 
         ``scratch`` is a temporary folder holding ``session`` (the demo's): Save copies the
         session elsewhere, and the folder is deleted when the document is closed.
         """
+        if rig is not None and rig is self.rig:  # e.g. the rig just calibrated: keep it open
+            self.rig = None
         self._teardown()
         self.doc, self.session = document, session
         self.rig, self.scratch = rig, scratch
@@ -582,12 +585,10 @@ class MainWindow(QMainWindow):
 
     def _on_acquired(self, result) -> None:
         """A finished cascade becomes the document's acquisition; the last target stays free."""
-        from engine.workflow import load_decomposition, plan_key
-
         by_name = {t.name: t.uid for t in self.doc.targets}
         try:
             cascade = [by_name[name] for name, _ in result.targets]
-            self.doc.set_acquisition(cascade, load_decomposition(self.session), key=plan_key(self.session))
+            self.doc.set_acquisition(cascade, result.decomposition, key=result.key)
         except (KeyError, InputError) as exc:
             self.show_error("Cannot use the acquisition", exc)
             return
@@ -735,9 +736,9 @@ class MainWindow(QMainWindow):
             self.open_path(path)
 
     def _on_open_image(self) -> None:
+        raws = " ".join(f"*{ext}" for ext in sorted(RAW_EXTENSIONS))  # the one list read_image decodes
         path, _ = QFileDialog.getOpenFileName(
-            self, "Open image", self._last_dir(),
-            "Images (*.exr *.tif *.tiff *.png *.jpg *.jpeg *.nef *.cr2 *.cr3 *.arw *.dng *.raf *.orf *.rw2)")
+            self, "Open image", self._last_dir(), f"Images (*.exr *.tif *.tiff *.png *.jpg *.jpeg {raws})")
         if path:
             self.open_path(path)
 

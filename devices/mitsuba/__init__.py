@@ -99,8 +99,8 @@ class MitsubaRig(Rig):
     renderer : devices.mitsuba.render.Renderer
     """
 
-    def __init__(self, name, camera, projector, *, targets, coverage, truth, renderer, lighting):
-        super().__init__(name, camera, projector, targets=targets, truth=truth)
+    def __init__(self, name, camera, projector, *, targets, coverage, truth, renderer, lighting, fingerprint=None):
+        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
         self.coverage = coverage
         self.renderer = renderer
         self._lighting = lighting
@@ -242,8 +242,17 @@ def open_rig(arg: str, **options) -> MitsubaRig:
         coverage[tname] = coverage_all[sel].sum(axis=0)
         targets[tname] = coverage[tname] >= 0.5
     lighting = _lighting(rig_scene)
+    fingerprint = {"scene": rig_scene.digest, "projector pose": kind, "ideal": ideal, "materials": materials}
     return MitsubaRig(
-        name, camera, projector, targets=targets, coverage=coverage, truth=truth, renderer=renderer, lighting=lighting
+        name,
+        camera,
+        projector,
+        targets=targets,
+        coverage=coverage,
+        truth=truth,
+        renderer=renderer,
+        lighting=lighting,
+        fingerprint=fingerprint,
     )
 
 

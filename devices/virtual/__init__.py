@@ -58,8 +58,8 @@ class VirtualRig(Rig):
         The precomputed transport (for tests and benchmarks).
     """
 
-    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer, coverage=None):
-        super().__init__(name, camera, projector, targets=targets, truth=truth)
+    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer, coverage=None, fingerprint=None):
+        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
         self.coverage = dict(coverage or {})
         self._renderer = renderer
         self.scene: Scene = renderer.scene
@@ -191,8 +191,10 @@ def open_rig(arg: str, **options) -> VirtualRig:
     name = f"virtual:{arg}"
     camera = VirtualCamera(renderer, projector, cmodel, np.random.default_rng(seed), name)
     truth = Truth(renderer, pmodel, cmodel, pres)
+    fingerprint = {"scene": scene.digest, "projector pose": kind, "ideal": ideal, "patch size": float(patch),
+                   "supersample": int(sub), "defocus": float(defocus)}
     return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer,
-                      coverage=target_coverage(scene, setup))
+                      coverage=target_coverage(scene, setup), fingerprint=fingerprint)
 
 
 def _on_target(pieces, quad, a, b) -> np.ndarray:
