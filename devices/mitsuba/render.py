@@ -267,6 +267,7 @@ class Renderer:
         self, *, ambient: bool, emitted: np.ndarray | None, spp: int, seed: int, what: str = "", integrator=None
     ) -> np.ndarray:
         """One render of the scene under these lights (zeros if there is no light)."""
+        ambient = ambient and bool(self._emitter_keys)  # a scene lit by the projector alone has none
         if not ambient and (emitted is None or not np.any(emitted > 0)):
             return np.zeros(self.shape + (3,), np.float32)
         self._set_lights(ambient, None if emitted is None or not np.any(emitted > 0) else emitted)

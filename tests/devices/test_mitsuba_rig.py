@@ -106,6 +106,13 @@ def test_truth_recolors_shapes_including_their_mixed_pixels(rig):
         rig.truth.components(mask, 3)
 
 
+def test_a_scene_lit_by_the_projector_alone_has_a_black_ambient_image():
+    with devices.open_rig("mitsuba:floor", ideal=True, **SMALL) as r:
+        assert not r.renderer.ambient_image().any()
+        r.flood()
+        assert r.camera.capture().image.mean() > 0
+
+
 def test_ambient_render_is_cached_on_disk(tmp_path):
     opts = dict(SMALL, cache_dir=tmp_path, resolution=(12, 12))
     with devices.open_rig("mitsuba:cornell", ideal=True, **opts) as r1:
