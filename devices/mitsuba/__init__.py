@@ -12,6 +12,7 @@ pixels average their whole footprint (edges are mixed) and the truth is per shap
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -242,7 +243,8 @@ def open_rig(arg: str, **options) -> MitsubaRig:
         coverage[tname] = coverage_all[sel].sum(axis=0)
         targets[tname] = coverage[tname] >= 0.5
     lighting = _lighting(rig_scene)
-    fingerprint = {"scene": rig_scene.digest, "projector pose": kind, "ideal": ideal, "materials": materials}
+    fingerprint = {"scene": rig_scene.digest, "projector pose": kind, "ideal": ideal,
+                   "materials": json.dumps(materials, sort_keys=True)}
     return MitsubaRig(
         name,
         camera,

@@ -95,9 +95,12 @@ def test_wizard_opens_the_path_traced_rig_like_the_virtual_one(make_wizard, qtbo
                     rig_options={"cache_dir": str(tmp_path / "mi"), "spp": 4, "ambient_spp": 8, "coverage_passes": 4})
     assert w.rig_page.virtual.isEnabled()
     assert w.rig_page.options() == {"ideal": True, "projector": "coaxial", "resolution": (RES, RES)}
-    _to_calibration_page(w, qtbot)
+    w.next()
+    assert w.currentId() == w.PAGE_PROJECTOR and w.projector_page.screens.isHidden()
+    w.next()  # opens the rig on a worker: loading Mitsuba and rendering take longer than the virtual rig
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=4 * TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.exposure_page.live.frames >= 1, timeout=4 * TIMEOUT_MS)
     assert w.rig.name == "mitsuba:cornell" and w.rig.camera.resolution == (RES, RES)
-    assert w.projector_page.screens.isHidden()
 
 
 def test_wizard_calibrates_into_a_session_on_workers(make_wizard, qtbot, tmp_path):
