@@ -77,14 +77,16 @@ _RED = "#c0392b"
 def _esc(text: str) -> str:
     """Escape text for a rich-text label (quotes stay readable)."""
     return html.escape(text, quote=False)
-_NO_SCREEN_BACKENDS = ("virtual", "replay")
+_NO_SCREEN_BACKENDS = ("virtual", "mitsuba", "replay")
+# rigs that simulate their scene: they take the "Virtual rig" options and report set-up progress
+_SIMULATED = ("virtual:", "mitsuba:")
 
 
 # ---------------------------------------------------------------------------------- helpers
 def _open_rig(name: str, options: dict, *, progress=None, should_stop=None):
-    """Open a rig on a worker (virtual set-ups report their build progress)."""
+    """Open a rig on a worker (simulated rigs report their set-up progress)."""
     checkpoint(should_stop, "opening the rig")
-    if name.startswith("virtual:"):
+    if name.startswith(_SIMULATED):
         options = dict(options, progress=progress)
     return devices.open_rig(name, **options)
 
@@ -218,7 +220,7 @@ class RigPage(QWizardPage):
             self.rig_name.setText(item.data(Qt.ItemDataRole.UserRole))
 
     def _on_name_changed(self, text: str) -> None:
-        self.virtual.setEnabled(text.startswith("virtual:"))
+        self.virtual.setEnabled(text.startswith(_SIMULATED))
         self.completeChanged.emit()
 
     def _on_browse(self) -> None:
@@ -235,8 +237,8 @@ class RigPage(QWizardPage):
         return bool(name) and ":" in name and bool(self.session_path.text().strip())
 
     def options(self) -> dict:
-        """Options for :func:`devices.open_rig` from this page (virtual rigs only)."""
-        if not self.rig_name.text().startswith("virtual:"):
+        """Options for :func:`devices.open_rig` from this page (simulated rigs only)."""
+        if not self.rig_name.text().startswith(_SIMULATED):
             return {}
         return {"ideal": self.ideal.isChecked(), "projector": self.pose.currentText(),
                 "resolution": (self.res_h.value(), self.res_w.value())}
@@ -275,8 +277,8 @@ class ProjectorPage(QWizardPage):
             self.screens.hide()
         elif backend in _NO_SCREEN_BACKENDS:
             self.note.setText(
-                "The virtual rig simulates its projector (its pose is chosen on the first page): there is no "
-                "screen to choose." if backend == "virtual" else
+                f"The {'virtual' if backend == 'virtual' else 'path-traced'} rig simulates its projector (its pose "
+                "is chosen on the first page): there is no screen to choose." if backend in ("virtual", "mitsuba") else
                 "A replay rig serves recorded captures back: it has no projector screen.")
             self.screens.hide()
         else:
@@ -843,7 +845,7 @@ class CalibrationWizard(QWizard):
     def _spec(self) -> tuple:
         name = self.rig_page.rig_name.text().strip()
         options = dict(self.rig_page.options(), **self.projector_page.options())
-        if name.startswith("virtual:"):
+        if name.startswith(_SIMULATED):
             options.update(self.rig_options)
         return name, options
 

@@ -43,6 +43,17 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     np.testing.assert_allclose(read_image(tmp_path / "export.tif"), read_image(out / "recolored.exr"), rtol=1e-6)
 
 
+def test_demo_runs_on_the_path_traced_rig(tmp_path):
+    pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+    out = tmp_path / "demo"
+    result = _run("demo", "-o", str(out), "--rig", "mitsuba:cornell", "--ideal", "--resolution", "16", "--spp", "16",
+                  "--order", "2", "--kappa", "1,0.5,1", "--denoise", "0")
+    assert result.returncode == 0, result.stderr
+    assert "relative error vs ground truth" in result.stderr
+    assert read_image(out / "recolored.exr").shape == (16, 16, 3)
+    assert float(result.stdout.strip()) < 25  # percent: 16 spp renders, a 16² box
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -51,6 +62,7 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
         (["capture", "{tmp}/nowhere", "--target", "right_wall"], "no session folder"),
         (["calibrate", "{tmp}/s", "--rig", "nosuch:0"], "unknown rig backend"),
         (["demo", "-o", "{tmp}/d", "--target", "ceiling", "--resolution", "16"], "has no target"),
+        (["demo", "-o", "{tmp}/d", "--rig", "opencv:0"], "must be a rig with ground truth"),
     ],
 )
 def test_bad_input_gives_one_line_errors_and_nonzero_exit(tmp_path, args, message):
