@@ -9,3 +9,10 @@
 opens the desktop app. Import-linter contracts in ``pyproject.toml`` keep Qt out of
 ``app.model`` and ``app.cli``.
 """
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("albedit")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "unknown"

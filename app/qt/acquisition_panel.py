@@ -29,12 +29,11 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.qt.rig_views import ProgressEta, ThumbnailStrip, finish_job, rig_lock, worker_rig
-from app.qt.worker import Job, UiCaller
+from app.qt.rig_views import ThumbnailStrip
+from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
 from engine.acquire import Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
-from engine.progress import checkpoint
 from engine.workflow import estimated_report, load_calibration, run_capture
 
 __all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
@@ -70,18 +69,6 @@ def unreachable_pixels(calibration, mask: np.ndarray) -> np.ndarray:
     mask = np.asarray(mask, bool)
     filled, _ = fill_correspondence(calibration.correspondence, mask)
     return mask & ~filled.valid
-
-
-def _acquire(rig, session, targets, order, *, caller, progress=None, should_stop=None, **options):
-    """Job body: take the rig's lock, then :func:`run_capture` with the projector on the UI thread."""
-    lock = rig_lock(rig)
-    while not lock.acquire(timeout=0.05):
-        checkpoint(should_stop, "acquisition")
-    try:
-        return run_capture(worker_rig(rig, caller), session, targets, order, progress=progress,
-                           should_stop=should_stop, **options)
-    finally:
-        lock.release()
 
 
 class AcquisitionPanel(QWidget):
@@ -145,6 +132,7 @@ class AcquisitionPanel(QWidget):
         self.fixed_kappa: list = []
         self.job: Job | None = None
         self._cancelling = False
+        self._shots = 0
         self._left_out: list[str] = []
         self.result = None
 
@@ -173,14 +161,12 @@ class AcquisitionPanel(QWidget):
 
         self.targets_label = QLabel()
         self.targets_label.setWordWrap(True)
-        self.start_button = QPushButton("Start")
-        self.pause_button = QPushButton("Pause")
-        self.pause_button.setCheckable(True)
-        self.cancel_button = QPushButton("Cancel")
+        self.start_button = QPushButton("Start", objectName="acquire_start")
+        self.eta = JobProgress("acquire_progress", unit="camera shots", stacked=True)
+        self.pause_button, self.cancel_button = self.eta.pause, self.eta.cancel
         buttons = QHBoxLayout()
-        for b in (self.start_button, self.pause_button, self.cancel_button):
-            buttons.addWidget(b)
-        self.eta = ProgressEta(unit="captures", stacked=True)
+        buttons.addWidget(self.start_button)
+        buttons.addWidget(self.eta, 1)
         self.thumbnails = ThumbnailStrip(size=thumb_size)
         self.status = QLabel()
         self.status.setWordWrap(True)
@@ -189,15 +175,12 @@ class AcquisitionPanel(QWidget):
         lay.addWidget(self.targets_label)
         lay.addLayout(form)
         lay.addLayout(buttons)
-        lay.addWidget(self.eta)
         lay.addWidget(self.thumbnails)
         lay.addWidget(self.status)
         lay.addStretch(1)
 
         self.policy.currentIndexChanged.connect(self._update)
         self.start_button.clicked.connect(self.start)
-        self.pause_button.toggled.connect(self._on_pause_toggled)
-        self.cancel_button.clicked.connect(self.cancel)
         self._thumbnail_ready.connect(self._on_thumbnail)
         self.set_targets(targets, fixed_kappa)
         self.set_session(session)
@@ -331,8 +314,6 @@ class AcquisitionPanel(QWidget):
             QMessageBox.warning(self, "Cannot start the acquisition", reason)
             return None
         self.result = None
-        self.eta.reset()
-        self.pause_button.setChecked(False)
         size = self.thumbnails.thumb_size
         self.thumbnails.clear()
 
@@ -340,12 +321,11 @@ class AcquisitionPanel(QWidget):
             self._thumbnail_ready.emit(name, ThumbnailStrip.make_thumbnail(image, size))
 
         resumed = len(self._plan_captures())
-        job = Job(_acquire, self.rig, self.session, targets, int(self.order.value()),
+        job = Job(run_on_rig, run_capture, self.rig, self.session, targets, int(self.order.value()),
                   caller=self.ui, fixed_kappa=[k.copy() for k in self.fixed_kappa],
                   settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
                   on_capture=on_capture, name="Acquiring", synchronous=self.synchronous)
-        job.progress.connect(self.eta.update_progress)
-        job.paused.connect(self._on_paused)
+        job.progress.connect(self._on_progress)
         job.finished.connect(self._on_finished)
         job.failed.connect(self._on_failed)
         job.cancelled.connect(self._on_cancelled)
@@ -358,6 +338,8 @@ class AcquisitionPanel(QWidget):
         notes += self._left_out
         self._note("\n".join(notes))
         self.busy_changed.emit(True)
+        self.eta.attach(job)
+        self._shots = resumed
         self.started.emit(job)
         job.start()
         if self.busy:  # threaded: lock the controls until it ends (a synchronous run has ended already)
@@ -385,9 +367,10 @@ class AcquisitionPanel(QWidget):
 
         Called by :meth:`closeEvent`; call it before deleting a panel that was never shown.
         """
-        if self.busy:
-            self._cancelling = True
-        return finish_job(self.job, timeout=timeout)
+        if not self.busy:
+            return True
+        self._cancelling = True
+        return self.job.wait(timeout, cancel=True)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
         self.shutdown()
@@ -398,25 +381,19 @@ class AcquisitionPanel(QWidget):
         self.thumbnails.add_thumbnail(name, rgb)
         self.thumbnail_added.emit(name)
 
-    def _on_pause_toggled(self, on: bool) -> None:
-        self.pause() if on else self.resume()
-
-    def _on_paused(self, on: bool) -> None:
-        self.pause_button.blockSignals(True)
-        self.pause_button.setChecked(on)
-        self.pause_button.blockSignals(False)
-        self.pause_button.setText("Resume" if on else "Pause")
-        if on:
-            self.eta.set_note("paused")
+    def _on_progress(self, step: int, total: int, _message: str) -> None:
+        self._shots = max(self._shots, int(step))
 
     def _on_finished(self, result) -> None:
         self.result = result
-        lines = [f"Captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots)."]
+        shots = max(self._shots, result.captures)
+        lines = [f"Captured {result.images} observation images ({result.predicted} more predicted) in {shots} "
+                 f"camera shots: {result.captures} for the observations, {shots - result.captures} for the "
+                 "direct image D."]
         lines += self._left_out + [f"{name}: {prepared.report()}" for name, prepared in result.targets]
         if self.session is not None and (line := estimated_report(self.session)):
             lines.append(line + ".")
         self._note("\n".join(lines))
-        self.eta.set_note("done")
         self.acquired.emit(result)
 
     def _on_failed(self, exc) -> None:
@@ -429,13 +406,11 @@ class AcquisitionPanel(QWidget):
         kept = len(self._plan_captures())
         self._note(f"Cancelled. The {kept} captures taken so far are kept in the session: Resume continues "
                    "where it stopped.")
-        self.eta.set_note("cancelled")
         self.cancelled.emit()
 
     def _on_ended(self, job: Job) -> None:
         if self.job is job:
             self.job = None
-        self._on_paused(False)
         self._update()
         self.busy_changed.emit(False)
 
@@ -450,15 +425,13 @@ class AcquisitionPanel(QWidget):
             w.setEnabled(not busy)
         self.threshold.setEnabled(not busy and POLICIES[self.policy.currentIndex()][1] != "brute")
         self.start_button.setEnabled(not busy)
-        self.pause_button.setEnabled(busy)
-        self.cancel_button.setEnabled(busy)
         interrupted = (self.session is not None and self.session.state.get("plan") is not None
                        and self.session.state.get("status") != "captured" and bool(self._plan_captures()))
         self.start_button.setText("Resume" if interrupted and not busy else "Start")
         if self.targets:
             parts = [f"{_esc(n)} (κ fixed {', '.join(f'{v:g}' for v in k)})"
                      for (n, _), k in zip(self.targets[:-1], self.fixed_kappa)]
-            parts.append(f"<b>{_esc(self.targets[-1][0])}</b> (acquired, κ free)")
+            parts.append(f"<b>{_esc(self.targets[-1][0])}</b> (κ free)")
             self.targets_label.setText("Targets: " + " → ".join(parts))
         else:
             self.targets_label.setText("No target yet: paint one.")

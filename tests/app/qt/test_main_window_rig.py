@@ -19,8 +19,8 @@ def test_acquire_from_the_main_window_gives_an_editable_decomposition(make_windo
         doc = Document(photo)
         doc.add_target("right_wall", rig.targets["right_wall"])
         window = make_window(doc, session, rig=rig)
-        window.acquire()
-        panel = window._acquisition_dock.widget()
+        window.act_acquire.trigger()
+        panel = window.rigs.panel
         with qtbot.waitSignal(panel.acquired, timeout=60_000):
             job = panel.start()
             assert job is not None, dialogs.shown
