@@ -84,8 +84,8 @@ def probe() -> list[Availability]:
 
     Examples
     --------
-    >>> [a.name for a in probe()][:1]
-    ['virtual:cornell']
+    >>> "virtual:cornell" in [a.name for a in probe()]
+    True
     """
     return [Availability(f"virtual:{n}", True, "simulated rig") for n in scene_names()]
 

@@ -2,6 +2,7 @@
 and adaptive capture (Sec. 5). Everything talks to a rig through :class:`Recorder` only."""
 
 from engine.acquire.cascade import CascadeResult, acquire_cascade, acquire_single
+from engine.acquire.checker import CheckerMeasurement, measure_checker
 from engine.acquire.emission import Emission, Emitter, Negative
 from engine.acquire.predict import Adaptive, Policy, Predictor
 from engine.acquire.recorder import Recorder
@@ -13,6 +14,7 @@ __all__ = [
     "Acquisition",
     "Adaptive",
     "CascadeResult",
+    "CheckerMeasurement",
     "Policy",
     "Predictor",
     "acquire_cascade",
@@ -25,6 +27,7 @@ __all__ = [
     "acquire_single",
     "calibrate_rig",
     "calibration_budget",
+    "measure_checker",
     "prepare_target",
     "reemit",
 ]
