@@ -147,11 +147,15 @@ class RigControl(QObject):
         from app.qt.calibration_wizard import CalibrationWizard
 
         doc, session = self.w.doc, self.w.session
-        name = self.rig.name if self.rig is not None else (session.rig_name if session is not None else None)
+        name = self.rig.name if self.rig is not None else None
+        if name is None and session is not None and ":" in session.rig_name:  # not a plain photograph's
+            name = session.rig_name
+        if name is None and self.last is not None:
+            name = self.last[0]
         wizard = CalibrationWizard(self.w, rig=self.rig, keep_rig=self.rig is None, rig_name=name,
                                    resolution=None if doc is None else doc.shape, settings=self.w.settings,
                                    synchronous=self.w.synchronous)
-        wizard.setObjectName("calibration_wizard")
+        wizard.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
         wizard.finished_session.connect(lambda s: self._on_calibrated(wizard, s))
         wizard.open()
 

@@ -32,6 +32,7 @@ from PySide6.QtCore import QSettings, Signal
 from PySide6.QtWidgets import QAbstractSpinBox, QLineEdit, QWidget, QWizard
 
 import devices
+from app.model.demo import DEMO_RIG
 from app.qt.calibration_wizard.calibration_pages import (
     PAGE_CALIBRATE,
     PAGE_EXPOSURE,
@@ -77,7 +78,7 @@ class CalibrationWizard(QWizard):
         An open rig to calibrate (the rig page then only asks for the session folder). The
         wizard never closes a rig it was given.
     rig_name : str, optional
-        Preselect this rig on the first page (e.g. ``"virtual:cornell"``; default: the last one).
+        Preselect this rig on the first page (default: the last one chosen, else the demo's).
     rig_options : dict, optional
         Extra :func:`devices.open_rig` options for virtual rigs (``cache_dir``, ``seed``).
     resolution : (H, W), optional
@@ -140,7 +141,7 @@ class CalibrationWizard(QWizard):
         self.live_interval_ms = int(live_interval_ms)
         self.keep_rig = bool(keep_rig)
         self.given_rig = rig
-        self.initial_rig_name = rig_name or self._remembered("rig")
+        self.initial_rig_name = rig_name or self._remembered("rig") or DEMO_RIG
         self.rig_options = dict(rig_options or {})
         folder = sessions_dir or self._remembered("sessions_dir")
         self.sessions_dir = Path(folder) if folder else Path.home() / "Albedit" / "sessions"

@@ -43,9 +43,10 @@ class EnterCommits(QObject):
 
     def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt name)
         if event.type() == QEvent.Type.KeyPress and event.key() in (Qt.Key.Key_Return, Qt.Key.Key_Enter):
-            if isinstance(obj, QAbstractSpinBox):
-                obj.interpretText()
-                obj.editingFinished.emit()
+            spin = obj if isinstance(obj, QAbstractSpinBox) else obj.parent()
+            if isinstance(spin, QAbstractSpinBox):  # the spin box, or the line edit inside it
+                spin.interpretText()
+                spin.editingFinished.emit()
                 return True
             if isinstance(obj, QLineEdit):
                 obj.editingFinished.emit()
