@@ -273,6 +273,7 @@ def test_auto_exposure_and_identify_on_the_exposure_page(make_wizard, qtbot):
     assert page.level.currentIndex() == 1 and not page.auto_button.isEnabled()
     qtbot.waitUntil(lambda: page.auto is None, timeout=TIMEOUT_MS)
     assert "settled" in page.report.text() and page.auto_button.isEnabled() and page.level.currentIndex() == 0
+    assert page.controller.frames <= 3  # the frames say where the camera clips: one jump, then settled
     qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3), timeout=TIMEOUT_MS)
     white = rig.camera.capture()
     rig.projector.show(np.zeros(rig.projector.resolution + (3,), np.float32))
@@ -368,7 +369,8 @@ def test_the_main_window_wizard_starts_from_the_document_and_remembers(make_wind
 
     user.trigger("calibrate")  # now the open rig: named in words, no Python repr
     w = window.findChild(QWizard, "calibration_wizard")
-    assert w.rig_page.given.text() == f"Using the rig that is open: virtual:cornell — camera {RES}×{RES}, projector {RES}×{RES}."
+    assert w.rig_page.given.text() == (f"Using the rig that is open: virtual:cornell — camera {RES}×{RES}, "
+                                       f"projector {RES}×{RES}.")
     assert w.rig_page.rigs.isHidden() and w.rig_page.rigs_label.isHidden()
     w.reject()
     assert window.rig is not None  # the wizard never closes a rig it was given
