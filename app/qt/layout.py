@@ -6,8 +6,9 @@ from PySide6.QtCore import Qt
 from PySide6.QtGui import QGuiApplication
 from PySide6.QtWidgets import QScrollArea, QWidget
 
-#: Room the window manager takes around a window (title bar, borders), in logical pixels.
+#: Room the window manager takes around a window (title bar and bottom border; side borders), logical pixels.
 FRAME = 40
+SIDES = 16
 
 
 def fit_to_screen(widget: QWidget, preferred: tuple[int, int]) -> None:
@@ -17,7 +18,7 @@ def fit_to_screen(widget: QWidget, preferred: tuple[int, int]) -> None:
         widget.resize(*preferred)
         return
     area = screen.availableGeometry()
-    w, h = min(preferred[0], area.width()), min(preferred[1], area.height() - FRAME)
+    w, h = min(preferred[0], area.width() - SIDES), min(preferred[1], area.height() - FRAME)
     widget.resize(w, h)
     widget.move(area.x() + (area.width() - w) // 2, area.y() + max((area.height() - FRAME - h) // 2, 0))
 
