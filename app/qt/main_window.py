@@ -267,6 +267,7 @@ class MainWindow(QMainWindow):
         self.canvas = Canvas(document, self.painter)
         self.canvas.setObjectName("canvas")
         self.setCentralWidget(self.canvas)
+        self.canvas.setFocus()  # single-key shortcuts (tools, views) work at once
         self.preview = PreviewController(document, max_shape=self._screen_shape(), synchronous=self.synchronous,
                                          parent=self)
         self.preview.exposure = self.exposure_spin.value()

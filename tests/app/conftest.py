@@ -91,6 +91,8 @@ def make_window(qtbot, tmp_path):
         w.resize(1200, 800)
         w.show()
         qtbot.waitExposed(w)
+        w.activateWindow()  # shortcuts go to the active window, as on a desktop
+        qtbot.waitUntil(w.isActiveWindow)
         windows.append(w)
         return w
 

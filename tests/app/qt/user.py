@@ -10,8 +10,8 @@ psygnal callback called from one) fails the test (``test_an_exception_escaping_a
 
 from __future__ import annotations
 
-from PySide6.QtCore import QPoint, QPointF, Qt
-from PySide6.QtGui import QAction
+from PySide6.QtCore import QEvent, QPoint, QPointF, Qt
+from PySide6.QtGui import QAction, QKeyEvent
 from PySide6.QtWidgets import (
     QAbstractButton,
     QAbstractItemView,
@@ -66,9 +66,18 @@ class User:
         assert w.isVisible() and w.isEnabled(), f"{w.objectName()!r} cannot be typed into"
         self.qtbot.mouseClick(edit, Qt.MouseButton.LeftButton, pos=edit.rect().center())
         self.qtbot.keyClick(edit, Qt.Key.Key_A, Qt.KeyboardModifier.ControlModifier)
-        self.qtbot.keyClicks(edit, text)
+        self.type_text(edit, text)
         if enter:
             self.qtbot.keyClick(edit, Qt.Key.Key_Return)
+
+    def type_text(self, widget: QWidget, text: str) -> None:
+        """Type ``text`` into ``widget`` key by key (characters beyond ASCII as a keyboard layout sends them)."""
+        for ch in text:
+            if ch.isascii():
+                self.qtbot.keyClicks(widget, ch)
+            else:  # QTest only knows ASCII keys: a key event carrying the character, as from a compose key
+                for kind in (QEvent.Type.KeyPress, QEvent.Type.KeyRelease):
+                    QApplication.sendEvent(widget, QKeyEvent(kind, 0, Qt.KeyboardModifier.NoModifier, ch))
 
     def press(self, key, modifiers=Qt.KeyboardModifier.NoModifier) -> None:
         """A key press where the keyboard focus is (as a person presses a shortcut)."""
@@ -96,7 +105,7 @@ class User:
         editor = lst.viewport().findChild(QLineEdit) or lst.findChild(QLineEdit)
         assert editor is not None and editor.isVisible(), "double-clicking the row opened no editor"
         self.qtbot.keyClick(editor, Qt.Key.Key_A, Qt.KeyboardModifier.ControlModifier)
-        self.qtbot.keyClicks(editor, text)
+        self.type_text(editor, text)
         self.qtbot.keyClick(editor, Qt.Key.Key_Return)  # the view commits on its next event-loop turn
         self.qtbot.waitUntil(lambda: lst.state() != QAbstractItemView.State.EditingState, timeout=5000)
 
