@@ -32,6 +32,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.model.document import Document
+from app.model.noise import denoise_radius
 from app.model.target import KAPPA_MAX, KAPPA_MIN
 from engine.errors import InputError
 
@@ -388,7 +389,6 @@ class NoiseReductionPanel(QWidget):
         self.radius.setRange(0, 32)
         self.radius.setSuffix(" px")
         self.radius.setSpecialValueText("off")
-        self.radius.setValue(4)
         self.radius.setToolTip("Filter radius: larger removes more noise and blurs interreflections more (0 = off)")
         self.apply = QPushButton("Apply", objectName="noise_apply")
         self.apply.setToolTip("Smooth the interreflection components along the photograph's edges; "
@@ -405,6 +405,8 @@ class NoiseReductionPanel(QWidget):
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addLayout(row)
         lay.addWidget(self.state)
+        self._judged = None
+        self._suggested, self._noise = 0, 0.0
         document.events.acquisition.connect(self._update)
         self._update()
 
@@ -414,7 +416,15 @@ class NoiseReductionPanel(QWidget):
             w.setEnabled(acq is not None)
         if acq is None:
             self.state.setText("Acquire a target first: noise reduction filters its decomposition.")
-        elif acq.denoise:
-            self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it).")
+            return
+        if acq.raw is not self._judged:  # a new measurement: suggest the radius its noise calls for
+            self._judged = acq.raw
+            self._suggested, self._noise = denoise_radius(acq.raw)
+            with QSignalBlocker(self.radius):
+                self.radius.setValue(acq.denoise or self._suggested)
+        suggestion = (f"Its noise is {100 * self._noise:.2g} % of the interreflections: "
+                      + (f"radius {self._suggested} px is suggested." if self._suggested else "no need to filter."))
+        if acq.denoise:
+            self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it). {suggestion}")
         else:
-            self.state.setText("Off: the decomposition as measured.")
+            self.state.setText(f"Off: the decomposition as measured. {suggestion}")
