@@ -50,7 +50,8 @@ def _denoise(text: str):
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("-o", "--output", type=Path, default=Path("albedit-demo"), help="output folder (default %(default)s)")
+    parser.add_argument("-o", "--output", type=Path, default=Path("albedit-demo"),
+                        help="output folder (default %(default)s)")
     parser.add_argument("--scene", default="cornell", help="virtual scene (default %(default)s)")
     parser.add_argument("--target", default=DEMO_TARGET, help="scene target to recolor (default %(default)s)")
     parser.add_argument("--kappa", type=kappa, default=np.array(DEMO_KAPPA), metavar="R,G,B",
@@ -63,7 +64,8 @@ def add_arguments(parser) -> None:
     rig.add_argument("--realistic", dest="ideal", action="store_false",
                      help="a realistic camera (shot and read noise, clipping) and projector (gamma, 8 bits, crosstalk)")
     parser.add_argument("--projector", choices=("coaxial", "offset"), default=DEMO_OPTIONS["projector"],
-                        help="projector pose: co-axial with the camera, or the scene's offset pose (default %(default)s)")
+                        help="projector pose: co-axial with the camera, or the scene's offset pose "
+                             "(default %(default)s)")
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute")
     parser.add_argument("--frames", type=int, default=None,
                         help="frames averaged per capture (default 1 on the ideal rig, 16 on the realistic one: "
@@ -158,7 +160,8 @@ def run(args) -> int:
         f"over the whole image (the lamp in view dominates the norm and every method reproduces it): "
         f"Albedit {100 * err['ours'][1]:.2f} %, naive {100 * err['naive'][1]:.2f} %\n"
         f"error.png: |ours - truth|, white = {scale:.3g} (99th percentile)\n"
-        f"wrote {out}/recolored.exr, recolored.png, photograph.png, truth.png, error.png in {time.monotonic() - t0:.0f} s",
+        f"wrote {out}/recolored.exr, recolored.png, photograph.png, truth.png, error.png "
+        f"in {time.monotonic() - t0:.0f} s",
         file=sys.stderr,
     )
     gain = float(np.max(np.maximum(args.kappa, 1.0))) ** d.order
