@@ -136,19 +136,20 @@ class AcquisitionPanel(QWidget):
         self._left_out: list[str] = []
         self.result = None
 
-        self.order = QSpinBox(minimum=1, maximum=8, value=4)
+        self.order = QSpinBox(minimum=1, maximum=8, value=4, objectName="acquire_order")
         self.order.setToolTip("K: the photograph plus K−1 re-emissions per target (a K-th order decomposition)")
-        self.policy = QComboBox()
+        self.policy = QComboBox(objectName="acquire_policy")
         for label, _ in POLICIES:
             self.policy.addItem(label)
-        self.threshold = QDoubleSpinBox(decimals=2, minimum=0.01, maximum=50.0, value=1.0, suffix=" %")
+        self.threshold = QDoubleSpinBox(decimals=2, minimum=0.01, maximum=50.0, value=1.0, suffix=" %",
+                                        objectName="acquire_threshold")
         self.threshold.setToolTip("relative error accepted for a predicted capture (paper: 1 %)")
-        self.emission = QComboBox()
+        self.emission = QComboBox(objectName="acquire_emission")
         for label, _ in _EMISSIONS:
             self.emission.addItem(label)
-        self.frames = QSpinBox(minimum=1, maximum=256, value=1)
+        self.frames = QSpinBox(minimum=1, maximum=256, value=1, objectName="acquire_frames")
         self.frames.setToolTip("frames averaged per capture: noise falls as 1/√frames")
-        self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach")
+        self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach", objectName="acquire_leave_out")
         self.leave_out.setToolTip("otherwise Start refuses a target with such pixels; left-out pixels keep "
                                   "their colour when the target is recolored")
         form = QFormLayout()
@@ -159,7 +160,7 @@ class AcquisitionPanel(QWidget):
         form.addRow("Frames averaged", self.frames)
         form.addRow(self.leave_out)
 
-        self.targets_label = QLabel()
+        self.targets_label = QLabel(objectName="acquire_targets")
         self.targets_label.setWordWrap(True)
         self.start_button = QPushButton("Start", objectName="acquire_start")
         self.eta = JobProgress("acquire_progress", unit="camera shots", stacked=True)
@@ -168,7 +169,8 @@ class AcquisitionPanel(QWidget):
         buttons.addWidget(self.start_button)
         buttons.addWidget(self.eta, 1)
         self.thumbnails = ThumbnailStrip(size=thumb_size)
-        self.status = QLabel()
+        self.thumbnails.setObjectName("acquire_thumbnails")
+        self.status = QLabel(objectName="acquire_status")
         self.status.setWordWrap(True)
 
         lay = QVBoxLayout(self)
@@ -430,7 +432,7 @@ class AcquisitionPanel(QWidget):
         self.start_button.setText("Resume" if interrupted and not busy else "Start")
         if self.targets:
             parts = [f"{_esc(n)} (κ fixed {', '.join(f'{v:g}' for v in k)})"
-                     for (n, _), k in zip(self.targets[:-1], self.fixed_kappa)]
+                     for (n, _), k in zip(self.targets[:-1], self.fixed_kappa, strict=False)]
             parts.append(f"<b>{_esc(self.targets[-1][0])}</b> (κ free)")
             self.targets_label.setText("Targets: " + " → ".join(parts))
         else:

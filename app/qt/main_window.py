@@ -220,7 +220,13 @@ class MainWindow(QMainWindow):
             tb = self.addToolBar(title)
             tb.setObjectName(name)
             for e in self._entries(entries):
-                tb.addSeparator() if e == "-" else tb.addWidget(e) if isinstance(e, QWidget) else tb.addAction(e)
+                if e == "-":
+                    tb.addSeparator()
+                elif isinstance(e, QWidget):
+                    tb.addWidget(e)
+                else:
+                    tb.addAction(e)
+                    tb.widgetForAction(e).setObjectName(f"{e.objectName()}_button")
 
     def _build_docks(self) -> None:
         self.targets_dock = QDockWidget("Targets (cascade order)", self, objectName="targets")
