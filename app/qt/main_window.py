@@ -245,7 +245,8 @@ class MainWindow(QMainWindow):
         self.note = QLabel(objectName="view_note")
         self.zoom_label = QLabel(objectName="zoom")
         self.progress = JobProgress("job_progress", hide_when_idle=True)
-        self.progress.setMaximumWidth(520)
+        self.progress.label.setMinimumWidth(240)
+        self.progress.setMaximumWidth(640)
         sb.addWidget(self.note, 1)  # temporary messages cover this one only
         sb.addPermanentWidget(self.readout)
         sb.addPermanentWidget(self.progress)
@@ -537,8 +538,11 @@ class MainWindow(QMainWindow):
         job.cancelled.connect(lambda exc: self.statusBar().showMessage(str(exc), 8000))
         job.ended.connect(ended)
         self.progress.attach(job, pausable=pausable, cancellable=cancellable)
-        if self.centralWidget() is self._placeholder:  # nothing open yet: say what is coming
+        if self.centralWidget() is self._placeholder:  # nothing open yet: say what is coming, as it goes
             self._placeholder.setText(f"{name}…\n\nIts progress is in the status bar.")
+            job.progress.connect(lambda step, total, message: self._placeholder.setText(
+                f"{name}…\n\n{message}" + (f" ({100 * step // total} %)" if total > 0 else ""))
+                if self.centralWidget() is self._placeholder else None)
         self._set_busy(True)
         self._update_actions()
         job.start()
