@@ -150,7 +150,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         with the window), the session, the rig options.
     """
     from devices import open_rig  # the app sits above devices; imported late to keep start-up light
-    from engine.workflow import load_decomposition, plan_key, run_calibration, run_capture
+    from engine.workflow import load_calibration, load_decomposition, plan_key, run_calibration, run_capture
 
     options = dict(DEMO_OPTIONS, **rig_options)
     saved = {k: v for k, v in options.items() if k not in ("progress", "cache_dir")}
@@ -172,10 +172,18 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         root.mkdir(parents=True, exist_ok=True)
         session = _session(root, rig_name, rig, saved)
         _prune(root, Path(session.path))
-        calibration = run_calibration(rig, session, progress=_stage(progress, "calibrating"), should_stop=should_stop)
-        result = run_capture(rig, session, [(DEMO_TARGET, targets[DEMO_TARGET])], DEMO_ORDER,
-                             progress=_stage(progress, f"acquiring {DEMO_TARGET!r}"), should_stop=should_stop)
-        photo = np.ascontiguousarray(result.acquisition.observations[0], np.float32)
+        if session.state.get("status") == "captured":  # a complete earlier start: read, don't re-run
+            report(progress, 0, 1, "reading the demo's session")
+            calibration = load_calibration(session)
+            photo = session.read_capture(next(c.name for c in reversed(session.captures)
+                                              if isinstance(c.meta, dict) and c.meta.get("kind") == "photograph"))
+        else:
+            calibration = run_calibration(rig, session, progress=_stage(progress, "calibrating"),
+                                          should_stop=should_stop)
+            result = run_capture(rig, session, [(DEMO_TARGET, targets[DEMO_TARGET])], DEMO_ORDER,
+                                 progress=_stage(progress, f"acquiring {DEMO_TARGET!r}"), should_stop=should_stop)
+            photo = result.acquisition.observations[0]
+        photo = np.ascontiguousarray(photo, np.float32)
         doc = Document(photo, unreachable=unreachable_pixels(calibration), source=rig_name, truth=rig.truth)
         for other, mask in targets.items():  # the acquired target last: the end of its cascade
             if other != DEMO_TARGET:
