@@ -8,7 +8,7 @@ live loop while the page is on screen — also after Back from a later page.
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtCore import QSignalBlocker, QTimer
+from PySide6.QtCore import QSignalBlocker, Qt, QTimer
 from PySide6.QtWidgets import (
     QCheckBox,
     QComboBox,
@@ -61,6 +61,9 @@ class ExposurePage(QWizardPage):
         self.overlay.toggled.connect(self.live.set_show_saturation)
         self.report = QLabel("waiting for the camera…", objectName="wizard_exposure_report")
         self.report.setWordWrap(True)
+        lines = self.report.fontMetrics().lineSpacing()
+        self.report.setFixedHeight(4 * lines + 4)  # the controls above must not move under the mouse
+        self.report.setAlignment(self.report.alignment() | Qt.AlignmentFlag.AlignTop)
         controls = QGridLayout()  # two rows: fits a 1366×768 screen with long labels
         row = QHBoxLayout()
         for w in (QLabel("Exposure"), self.exposure, shorter, longer, self.auto_button):

@@ -77,7 +77,7 @@ class RigPage(QWizardPage):
 
         lay = QVBoxLayout(self)
         lay.addWidget(self.rigs_label)
-        lay.addWidget(self.rigs, 1)
+        lay.addWidget(self.rigs, 3)
         lay.addWidget(self.given)
         name_row = QHBoxLayout()
         name_row.addWidget(QLabel("Rig"))
@@ -87,6 +87,7 @@ class RigPage(QWizardPage):
         lay.addWidget(QLabel("Session folder"))
         lay.addLayout(row)
         lay.addWidget(note)
+        lay.addStretch(1)  # with the list hidden (an open rig), the rest stays together at the top
 
         self.rigs.currentItemChanged.connect(self._on_pick)
         self.rig_name.textChanged.connect(self._on_name_changed)
