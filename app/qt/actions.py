@@ -16,10 +16,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from PySide6.QtCore import QEvent, QObject
-from PySide6.QtGui import QKeySequence
-from PySide6.QtWidgets import QAbstractSpinBox, QApplication, QLineEdit
+from PySide6.QtGui import QAction, QActionGroup, QKeySequence
+from PySide6.QtWidgets import QAbstractSpinBox, QApplication, QDoubleSpinBox, QLineEdit, QSpinBox, QWidget
 
-from app.model.painting import Tool
+from app.model.painting import Painter, Tool
+from app.model.views import VIEWS, CanvasView
 
 K = QKeySequence.StandardKey
 
@@ -174,3 +175,118 @@ class KeepAppShortcuts(QObject):
                 event.ignore()
                 return True  # not accepted by the field: the shortcut goes to the window's action
         return False
+
+def install(window) -> None:
+    """Make ``window``'s actions (as ``act_<name>``, tools, views), toolbars (with their spin boxes) and menus."""
+    _install_actions(window)
+    _install_toolbars(window)
+    _install_menus(window)
+
+
+def _add_action(window, name: str, text: str, slot, shortcut=None, tip: str = "", *, checkable=False) -> QAction:
+    a = QAction(text, window, objectName=name)
+    a.setShortcuts(key_sequences(shortcut))
+    a.setCheckable(checkable)
+    if tip:
+        a.setStatusTip(tip)
+        a.setToolTip(tip)
+    if slot is not None:
+        a.triggered.connect(slot)
+    window.addAction(a)
+    return a
+
+def _install_actions(window) -> None:
+    window.when: dict[str, str] = {}
+    for spec in ACTIONS:
+        if spec.name in ("undo", "redo"):  # QUndoGroup's: their text names the step ("Undo Paint 'wall'")
+            a = (window.undo_group.createUndoAction if spec.name == "undo" else window.undo_group.createRedoAction)(
+                window, spec.text)
+            a.setObjectName(spec.name)
+            a.setShortcuts(key_sequences(spec.shortcut))
+            window.addAction(a)
+        else:
+            target = getattr(window.rigs, spec.slot, None) or getattr(window.files, spec.slot, None) or \
+                getattr(window, spec.slot)
+            slot = target if spec.checkable else (lambda _c=False, f=target: f())
+            a = _add_action(window, spec.name, spec.text, slot, spec.shortcut, spec.tip, checkable=spec.checkable)
+            a.setChecked(spec.checked)
+        window.when[spec.name] = spec.when
+        setattr(window, f"act_{spec.name}", a)
+    window.tool_group = QActionGroup(window)
+    window.tool_actions: dict[Tool, QAction] = {}
+    for tool, key in TOOL_KEYS.items():
+        a = _add_action(window, f"tool_{tool.value}", tool.value.capitalize(),
+                             lambda _c=False, t=tool: window.set_tool(t), key, TOOL_TIPS[tool], checkable=True)
+        window.tool_group.addAction(a)
+        window.tool_actions[tool] = a
+    window.tool_actions[Tool.BRUSH].setChecked(True)
+    window.view_group = QActionGroup(window)
+    window.view_actions: dict[CanvasView, QAction] = {}
+    for spec in VIEWS:
+        a = _add_action(window, f"view_{spec.view.value}", spec.label, lambda _c=False, v=spec.view: window.set_view(v),
+                             spec.shortcut, f"{spec.label.replace('&', '')} ({spec.shortcut}): {spec.tip}",
+                             checkable=True)
+        a.setIconText(spec.short)
+        window.view_group.addAction(a)
+        window.view_actions[spec.view] = a
+    window.view_actions[CanvasView.RECOLORED].setChecked(True)
+
+def _entries(window, entries):
+    """Resolve a menu or toolbar layout: actions, "-" separators, "@" groups, "#" widgets."""
+    groups = {"@tools": list(window.tool_actions.values()), "@views": list(window.view_actions.values())}
+    for e in entries:
+        if e in groups:
+            yield from groups[e]
+        else:
+            yield window._toolbar_widgets[e[1:]] if e.startswith("#") else e if e in ("-", "@recent") else \
+                getattr(window, f"act_{e}")
+
+def _install_menus(window) -> None:
+    for name, title, entries in MENUS:
+        menu = window.menuBar().addMenu(title)
+        menu.setObjectName(name)
+        for e in _entries(window, entries):
+            if e == "-":
+                menu.addSeparator()
+            elif e == "@recent":
+                window.recent_menu = menu.addMenu("Open &Recent")
+                window.recent_menu.setObjectName("menu_recent")
+                window.recent_menu.aboutToShow.connect(window.files.fill_recent)
+            else:
+                menu.addAction(e)
+
+def _install_toolbars(window) -> None:
+    window.size_spin = QSpinBox(objectName="brush_size")
+    window.size_spin.setRange(int(Painter.MIN_SIZE), int(Painter.MAX_SIZE))
+    window.size_spin.setPrefix("Size ")
+    window.size_spin.setSuffix(" px")
+    window.size_spin.setToolTip("Brush diameter in camera pixels ([ and ] change it)")
+    window.size_spin.valueChanged.connect(lambda v: window.painter and window.painter.set_size(v))
+    window.tol_spin = QDoubleSpinBox(objectName="fill_tolerance")
+    window.tol_spin.setRange(0.005, 2.0)
+    window.tol_spin.setSingleStep(0.01)
+    window.tol_spin.setDecimals(3)
+    window.tol_spin.setValue(0.1)
+    window.tol_spin.setPrefix("Tolerance ")
+    window.tol_spin.setToolTip("Fill tolerance: largest |log colour difference| to the clicked pixel (0.1 ≈ ±10 %)")
+    window.tol_spin.valueChanged.connect(lambda v: window.painter and setattr(window.painter, "tolerance", float(v)))
+    window.exposure_spin = QDoubleSpinBox(objectName="display_exposure")
+    window.exposure_spin.setRange(-12.0, 12.0)
+    window.exposure_spin.setSingleStep(0.25)
+    window.exposure_spin.setPrefix("Exposure ")
+    window.exposure_spin.setSuffix(" EV")
+    window.exposure_spin.setToolTip("Display exposure in stops (does not change the data)")
+    window.exposure_spin.valueChanged.connect(lambda v: window.preview and window.preview.set_exposure(v))
+    window._toolbar_widgets = {"brush_size": window.size_spin, "fill_tolerance": window.tol_spin,
+                             "display_exposure": window.exposure_spin}
+    for name, title, entries in TOOLBARS:
+        tb = window.addToolBar(title)
+        tb.setObjectName(name)
+        for e in _entries(window, entries):
+            if e == "-":
+                tb.addSeparator()
+            elif isinstance(e, QWidget):
+                tb.addWidget(e)
+            else:
+                tb.addAction(e)
+                tb.widgetForAction(e).setObjectName(f"{e.objectName()}_button")

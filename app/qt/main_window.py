@@ -12,30 +12,28 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PySide6.QtCore import QSettings, QSignalBlocker, Qt, QTimer
-from PySide6.QtGui import QAction, QActionGroup, QGuiApplication, QUndoGroup, QUndoStack
+from PySide6.QtCore import QSettings, QSignalBlocker, Qt
+from PySide6.QtGui import QGuiApplication, QUndoGroup, QUndoStack
 from PySide6.QtWidgets import (
     QApplication,
     QDockWidget,
-    QDoubleSpinBox,
-    QFileDialog,
     QLabel,
     QMainWindow,
     QMessageBox,
-    QSpinBox,
     QVBoxLayout,
     QWidget,
 )
 
 import app
-from app.model import files, saving
 from app.model.document import Document
 from app.model.history import History
 from app.model.painting import Painter, Tool
 from app.model.render import component_grid
-from app.model.views import VIEWS, CanvasView
-from app.qt.actions import ACTIONS, MENUS, TOOL_KEYS, TOOL_TIPS, TOOLBARS, KeepAppShortcuts, key_sequences
+from app.model.views import CanvasView
+from app.qt import actions
+from app.qt.actions import KeepAppShortcuts
 from app.qt.canvas import Canvas
+from app.qt.file_control import FileControl
 from app.qt.layout import fit_to_screen, scrolling
 from app.qt.panels import AlbedoPanel, NoiseReductionPanel, TargetPanel
 from app.qt.preview import PreviewController
@@ -43,21 +41,10 @@ from app.qt.rig_control import RigControl
 from app.qt.undo import QtHistory
 from app.qt.worker import Job, JobProgress
 from engine.errors import InputError
-from engine.imageio import RAW_EXTENSIONS
-from engine.progress import checkpoint
 
-APP_NAME = "Albedit"
-MAX_RECENT = 8
+APP_NAME = app.APP_NAME
 #: The size the window asks for on a large screen; smaller screens get their available area.
 PREFERRED_SIZE = (1500, 920)
-
-_EXPORT_FILTERS = {
-    "OpenEXR, half float (*.exr)": (".exr", "half"),
-    "OpenEXR, float (*.exr)": (".exr", "float"),
-    "TIFF, 16-bit linear (*.tif *.tiff)": (".tif", "uint16"),
-    "TIFF, float (*.tif *.tiff)": (".tif", "float"),
-    "PNG, 8-bit sRGB for sharing (*.png)": (".png", "uint8"),
-}
 
 
 class MainWindow(QMainWindow):
@@ -103,9 +90,8 @@ class MainWindow(QMainWindow):
         self.setCentralWidget(self._placeholder)
         fit_to_screen(self, PREFERRED_SIZE)
         self.rigs = RigControl(self, rig)
-        self._build_actions()
-        self._build_toolbars()
-        self._build_menus()
+        self.files = FileControl(self)
+        actions.install(self)
         self._build_docks()
         self._build_status()
         self._shortcuts = KeepAppShortcuts(self)
@@ -121,113 +107,6 @@ class MainWindow(QMainWindow):
         return self.rigs.rig
 
     # ================================================================== construction
-    def _add_action(self, name: str, text: str, slot, shortcut=None, tip: str = "", *, checkable=False) -> QAction:
-        a = QAction(text, self, objectName=name)
-        a.setShortcuts(key_sequences(shortcut))
-        a.setCheckable(checkable)
-        if tip:
-            a.setStatusTip(tip)
-            a.setToolTip(tip)
-        if slot is not None:
-            a.triggered.connect(slot)
-        self.addAction(a)
-        return a
-
-    def _build_actions(self) -> None:
-        self.when: dict[str, str] = {}
-        for spec in ACTIONS:
-            if spec.name in ("undo", "redo"):  # QUndoGroup's: their text names the step ("Undo Paint 'wall'")
-                a = (self.undo_group.createUndoAction if spec.name == "undo" else self.undo_group.createRedoAction)(
-                    self, spec.text)
-                a.setObjectName(spec.name)
-                a.setShortcuts(key_sequences(spec.shortcut))
-                self.addAction(a)
-            else:
-                target = getattr(self.rigs, spec.slot, None) or getattr(self, spec.slot)
-                slot = target if spec.checkable else (lambda _c=False, f=target: f())
-                a = self._add_action(spec.name, spec.text, slot, spec.shortcut, spec.tip, checkable=spec.checkable)
-                a.setChecked(spec.checked)
-            self.when[spec.name] = spec.when
-            setattr(self, f"act_{spec.name}", a)
-        self.tool_group = QActionGroup(self)
-        self.tool_actions: dict[Tool, QAction] = {}
-        for tool, key in TOOL_KEYS.items():
-            a = self._add_action(f"tool_{tool.value}", tool.value.capitalize(),
-                                 lambda _c=False, t=tool: self.set_tool(t), key, TOOL_TIPS[tool], checkable=True)
-            self.tool_group.addAction(a)
-            self.tool_actions[tool] = a
-        self.tool_actions[Tool.BRUSH].setChecked(True)
-        self.view_group = QActionGroup(self)
-        self.view_actions: dict[CanvasView, QAction] = {}
-        for spec in VIEWS:
-            a = self._add_action(f"view_{spec.view.value}", spec.label, lambda _c=False, v=spec.view: self.set_view(v),
-                                 spec.shortcut, f"{spec.label.replace('&', '')} ({spec.shortcut}): {spec.tip}",
-                                 checkable=True)
-            a.setIconText(spec.short)
-            self.view_group.addAction(a)
-            self.view_actions[spec.view] = a
-        self.view_actions[CanvasView.RECOLORED].setChecked(True)
-
-    def _entries(self, entries):
-        """Resolve a menu or toolbar layout: actions, "-" separators, "@" groups, "#" widgets."""
-        groups = {"@tools": list(self.tool_actions.values()), "@views": list(self.view_actions.values())}
-        for e in entries:
-            if e in groups:
-                yield from groups[e]
-            else:
-                yield self._toolbar_widgets[e[1:]] if e.startswith("#") else e if e in ("-", "@recent") else \
-                    getattr(self, f"act_{e}")
-
-    def _build_menus(self) -> None:
-        for name, title, entries in MENUS:
-            menu = self.menuBar().addMenu(title)
-            menu.setObjectName(name)
-            for e in self._entries(entries):
-                if e == "-":
-                    menu.addSeparator()
-                elif e == "@recent":
-                    self.recent_menu = menu.addMenu("Open &Recent")
-                    self.recent_menu.setObjectName("menu_recent")
-                    self.recent_menu.aboutToShow.connect(self._fill_recent)
-                else:
-                    menu.addAction(e)
-
-    def _build_toolbars(self) -> None:
-        self.size_spin = QSpinBox(objectName="brush_size")
-        self.size_spin.setRange(int(Painter.MIN_SIZE), int(Painter.MAX_SIZE))
-        self.size_spin.setPrefix("Size ")
-        self.size_spin.setSuffix(" px")
-        self.size_spin.setToolTip("Brush diameter in camera pixels ([ and ] change it)")
-        self.size_spin.valueChanged.connect(lambda v: self.painter and self.painter.set_size(v))
-        self.tol_spin = QDoubleSpinBox(objectName="fill_tolerance")
-        self.tol_spin.setRange(0.005, 2.0)
-        self.tol_spin.setSingleStep(0.01)
-        self.tol_spin.setDecimals(3)
-        self.tol_spin.setValue(0.1)
-        self.tol_spin.setPrefix("Tolerance ")
-        self.tol_spin.setToolTip("Fill tolerance: largest |log colour difference| to the clicked pixel (0.1 ≈ ±10 %)")
-        self.tol_spin.valueChanged.connect(lambda v: self.painter and setattr(self.painter, "tolerance", float(v)))
-        self.exposure_spin = QDoubleSpinBox(objectName="display_exposure")
-        self.exposure_spin.setRange(-12.0, 12.0)
-        self.exposure_spin.setSingleStep(0.25)
-        self.exposure_spin.setPrefix("Exposure ")
-        self.exposure_spin.setSuffix(" EV")
-        self.exposure_spin.setToolTip("Display exposure in stops (does not change the data)")
-        self.exposure_spin.valueChanged.connect(lambda v: self.preview and self.preview.set_exposure(v))
-        self._toolbar_widgets = {"brush_size": self.size_spin, "fill_tolerance": self.tol_spin,
-                                 "display_exposure": self.exposure_spin}
-        for name, title, entries in TOOLBARS:
-            tb = self.addToolBar(title)
-            tb.setObjectName(name)
-            for e in self._entries(entries):
-                if e == "-":
-                    tb.addSeparator()
-                elif isinstance(e, QWidget):
-                    tb.addWidget(e)
-                else:
-                    tb.addAction(e)
-                    tb.widgetForAction(e).setObjectName(f"{e.objectName()}_button")
-
     def _build_docks(self) -> None:
         self.targets_dock = QDockWidget("Targets (cascade order)", self, objectName="targets")
         self.albedo_dock = QDockWidget("Albedo", self, objectName="albedo")
@@ -581,179 +460,32 @@ class MainWindow(QMainWindow):
                      on_done=done)
 
     def open_demo(self, rig_name: str | None = None) -> None:
-        """Open the virtual-rig demo: calibrated and acquired on a worker, with progress."""
-        if self.maybe_save():
+        """Open the virtual-rig demo (File ▸ Virtual Rig Demo)."""
+        if self.files.maybe_save():
             self.rigs.open_demo(rig_name)
 
     def open_path(self, path) -> bool:
-        """Open a session folder or an image; errors are shown, nothing else changes."""
-        if not self.maybe_save():
-            return False
-        if self.job is not None:
-            self.statusBar().showMessage(f"{self.job.name} is still running: open {Path(path).name} when it is done",
-                                         8000)
-            return False
-        outcome = {}
-
-        def work(progress=None, should_stop=None):  # a 24 MP session is ~1.7 GB to read: seconds
-            opened = files.open_document(path)
-            checkpoint(should_stop, "opening")
-            return opened
-
-        def done(result):
-            doc, session, warnings = result
-            self.set_document(doc, session)
-            self._add_recent(path)
-            outcome["ok"] = True
-            if warnings:
-                QMessageBox.warning(self, "Opened with warnings", "\n".join(warnings))
-
-        self.run_job(work, name=f"Opening {Path(path).name}", on_done=done, pausable=False,
-                     on_failed=lambda exc: self.show_error("Cannot open", exc))
-        return bool(outcome.get("ok")) if self.synchronous else True
-
-    def on_open_session(self) -> None:
-        path = QFileDialog.getExistingDirectory(self, "Open session folder", self._last_dir())
-        if path:
-            self.open_path(path)
-
-    def on_open_image(self) -> None:
-        raws = " ".join(f"*{e}" for e in sorted(RAW_EXTENSIONS))
-        path, _ = QFileDialog.getOpenFileName(self, "Open image", self._last_dir(),
-                                              f"Images (*.exr *.tif *.tiff *.png *.jpg *.jpeg {raws})")
-        if path:
-            self.open_path(path)
+        """Open a session folder or an image (see :meth:`FileControl.open_path`)."""
+        return self.files.open_path(path)
 
     def save(self) -> bool:
-        """Save into the current session (Save As when there is none, or for the demo). True when saved."""
-        if self.doc is None:
-            return False
-        if self.session is None or self.demo:
-            return self.save_as()
-        return self._save_into(self.session, None)
+        return self.files.save()
 
     def save_as(self, path=None) -> bool:
-        """Save into a new session folder (see :func:`app.model.saving.save_as`)."""
-        if self.doc is None:
-            return False
-        if path is None:
-            path, _ = QFileDialog.getSaveFileName(self, "Save session as (a new folder)", self._last_dir(),
-                                                  "Albedit session folder (*)")
-            if not path:
-                return False
-        return self._save_into(None, Path(path))
-
-    def _save_into(self, session, new_path: Path | None) -> bool:
-        doc, source = self.doc, self.session
-        projector = None if self.rig is None else tuple(self.rig.projector.resolution)
-
-        def work(progress=None, should_stop=None):
-            if new_path is None:
-                return saving.save_into(doc, session)
-            return saving.save_as(doc, new_path, source=source, projector_resolution=projector)
-
-        outcome = {}
-
-        def done(s):
-            self.session, self.demo = s, False
-            doc.mark_saved()
-            outcome["ok"] = True
-            if new_path is not None:
-                self._add_recent(new_path)
-            self.rigs.follow_document()
-            self._update_title()
-            self.statusBar().showMessage(f"Saved {s.path}", 5000)
-
-        self.run_job(work, name="Saving", on_done=done, pausable=False, cancellable=False)
-        return bool(outcome.get("ok")) if self.synchronous else True
-
-    def on_export(self) -> None:
-        if self.doc is None:
-            return
-        path, chosen = QFileDialog.getSaveFileName(self, "Export recolored image", self._last_dir(),
-                                                   ";;".join(_EXPORT_FILTERS))
-        if not path:
-            return
-        ext, dtype = _EXPORT_FILTERS.get(chosen, (Path(path).suffix.lower(), None))
-        if Path(path).suffix.lower() not in files.EXPORT_FORMATS:
-            path = path + ext
-        self.export(path, dtype=dtype)
+        return self.files.save_as(path)
 
     def export(self, path, *, dtype: str | None = None, clip: bool = False) -> None:
-        """Export the full-resolution recolored image on a worker (see :func:`app.model.files.export_image`)."""
-        exposure = self.exposure_spin.value()
-
-        def failed(exc):
-            if isinstance(exc, InputError) and "allow clipping" in str(exc) and not clip:
-                answer = QMessageBox.question(self, "Export", f"{exc}\n\nClip those values to 1 and export anyway?")
-                if answer == QMessageBox.StandardButton.Yes:
-                    QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True))
-                return
-            self.show_error("Export failed", exc)
-
-        self.run_job(files.export_image, self.doc, path, dtype=dtype, exposure=exposure, clip=clip,
-                     name="Exporting", on_done=lambda p: self.statusBar().showMessage(f"Exported {p}", 5000),
-                     on_failed=failed)
-
-    def maybe_save(self) -> bool:
-        """Ask about unsaved changes. True when it is fine to go on (saved or discarded)."""
-        if self.doc is None or not self.doc.is_dirty():
-            return True
-        answer = self.ask_unsaved()
-        if answer == QMessageBox.StandardButton.Cancel:
-            return False
-        if answer == QMessageBox.StandardButton.Discard:
-            return True
-        if not self.save():
-            return False
-        if self.job is not None:  # a threaded save: wait for it before going on
-            self.job.wait()
-        return not self.doc.is_dirty()
-
-    def ask_unsaved(self) -> QMessageBox.StandardButton:
-        """The unsaved-changes prompt (Save / Discard / Cancel)."""
-        box = QMessageBox(QMessageBox.Icon.Warning, APP_NAME, "The document has unsaved changes.",
-                          QMessageBox.StandardButton.Save | QMessageBox.StandardButton.Discard
-                          | QMessageBox.StandardButton.Cancel, self)
-        box.setInformativeText("Save the targets and albedo changes before closing?")
-        box.setDefaultButton(QMessageBox.StandardButton.Save)
-        box.setObjectName("unsaved_prompt")
-        return QMessageBox.StandardButton(box.exec())
+        self.files.export(path, dtype=dtype, clip=clip)
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt override
         if self.job is not None:
             self.job.wait(10.0, cancel=True)
-        if not self.maybe_save():
+        if not self.files.maybe_save():
             event.ignore()
             return
         self.rigs.shutdown()  # a running acquisition stops (its captures stay), the rig closes
         self._teardown()
         event.accept()
-
-    # ================================================================== recent files
-    def _recent(self) -> list[str]:
-        value = self.settings.value("recent", [])
-        if isinstance(value, str):
-            value = [value]
-        return [str(v) for v in (value or [])]
-
-    def _add_recent(self, path) -> None:
-        path = str(Path(path).resolve())
-        items = [path] + [p for p in self._recent() if p != path]
-        self.settings.setValue("recent", items[:MAX_RECENT])
-        self.settings.setValue("last_dir", str(Path(path).parent))
-
-    def _last_dir(self) -> str:
-        return str(self.settings.value("last_dir", str(Path.home())))
-
-    def _fill_recent(self) -> None:
-        self.recent_menu.clear()
-        items = self._recent()
-        for p in items:
-            a = self.recent_menu.addAction(p)
-            a.triggered.connect(lambda _c=False, p=p: self.open_path(p))
-        if not items:
-            self.recent_menu.addAction("(none)").setEnabled(False)
 
     def resizeEvent(self, e) -> None:  # noqa: N802
         super().resizeEvent(e)

@@ -122,7 +122,7 @@ class Dialogs:
 def dialogs(monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 
-    from app.qt.main_window import MainWindow
+    from app.qt.file_control import FileControl
 
     rec = Dialogs()
     for kind in ("critical", "warning", "information"):
@@ -139,7 +139,7 @@ def dialogs(monkeypatch):
         return rec._answer(QMessageBox.StandardButton.Cancel)
 
     monkeypatch.setattr(QMessageBox, "question", staticmethod(question))
-    monkeypatch.setattr(MainWindow, "ask_unsaved", unsaved)
+    monkeypatch.setattr(FileControl, "ask_unsaved", unsaved)
     return rec
 
 

@@ -159,7 +159,7 @@ def test_save_and_reopen_restores_the_edit(make_window, acquired_doc, tmp_path):
     # save again into the same session, then reopen in the window through recent files
     acquired_doc.rename_target(extra.uid, "renamed")
     assert w.save() and not acquired_doc.is_dirty()
-    assert w._recent()[0] == str((tmp_path / "s").resolve())
+    assert w.files.recent()[0] == str((tmp_path / "s").resolve())
     assert w.open_path(tmp_path / "s")
     assert [t.name for t in w.doc.targets] == ["floor", "wall", "renamed"]
 
@@ -185,13 +185,15 @@ def test_failed_save_loses_nothing(make_window, acquired_doc, tmp_path, monkeypa
     assert doc.by_name("wall").kappa[0] == 3.0
 
 
-def test_unsaved_changes_prompt_on_quit(make_window, acquired_doc, tmp_path, dialogs):
+def test_unsaved_changes_prompt_on_quit(make_window, acquired_doc, tmp_path, dialogs, monkeypatch):
     w = make_window(acquired_doc)
     acquired_doc.set_kappa(acquired_doc.by_name("wall").uid, 2.0)
     dialogs.answers = [Button.Cancel]
     assert not w.close() and w.isVisible() and acquired_doc.is_dirty()
     dialogs.answers = [Button.Save]
-    w.save_as = lambda: w._save_into(None, tmp_path / "saved")  # the file dialog's answer
+    from PySide6.QtWidgets import QFileDialog
+
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(tmp_path / "saved"), "")))
     assert w.close()
     assert [k for k, _, _ in dialogs.shown].count("unsaved") == 2
     doc, _, _ = files.open_document(tmp_path / "saved")
@@ -212,7 +214,7 @@ def test_real_unsaved_prompt_offers_save_discard_cancel(make_window, acquired_do
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
-    from app.qt.main_window import MainWindow
+    from app.qt.file_control import FileControl
 
     monkeypatch.undo()  # the genuine dialog this time
     w = make_window(acquired_doc)
@@ -224,7 +226,7 @@ def test_real_unsaved_prompt_offers_save_discard_cancel(make_window, acquired_do
         box.button(Button.Cancel).click()
 
     QTimer.singleShot(50, answer)
-    assert MainWindow.ask_unsaved(w) == Button.Cancel
+    assert FileControl.ask_unsaved(w.files) == Button.Cancel
     assert len(seen["buttons"]) == 3 and {"Cancel", "Save"} <= set(seen["buttons"])
 
 
