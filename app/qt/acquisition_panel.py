@@ -224,10 +224,14 @@ class AcquisitionPanel(QWidget):
         self._update()
 
     def set_targets(self, targets, fixed_kappa=()) -> None:
-        """Targets in cascade order as (name, mask), and the fixed κ of all but the last."""
+        """Targets in cascade order as (name, mask), and the fixed κ of all but the last.
+
+        The masks are not copied (the panel follows a document's targets as they are painted);
+        a run captures them as they are when it starts, and editing is locked while it runs.
+        """
         if self.busy:
             raise InputError("cannot change the targets while an acquisition runs")
-        self.targets = [(str(n), np.array(m, bool)) for n, m in targets]
+        self.targets = [(str(n), np.asarray(m, bool)) for n, m in targets]
         self.fixed_kappa = [np.broadcast_to(np.asarray(k, float), (3,)).copy() for k in fixed_kappa]
         self._update()
 

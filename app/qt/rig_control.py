@@ -202,13 +202,21 @@ class RigControl(QObject):
         doc = self.w.doc
         if doc is not self._watched:
             if self._watched is not None:
-                for sig in (self._watched.events.targets, self._watched.events.kappa, self._watched.events.acquisition):
+                for sig in (self._watched.events.targets, self._watched.events.acquisition):
                     sig.disconnect(self._on_document_changed)
+                self._watched.events.kappa.disconnect(self._on_kappa)
             if doc is not None:
-                for sig in (doc.events.targets, doc.events.kappa, doc.events.acquisition):
+                for sig in (doc.events.targets, doc.events.acquisition):
                     sig.connect(self._on_document_changed)
+                doc.events.kappa.connect(self._on_kappa)
             self._watched = doc
         self._on_document_changed()
+
+    def _on_kappa(self, uid: int, _kappa) -> None:
+        """Only the fixed κ of earlier cascade targets matter to the dock (not a slider drag on the last)."""
+        included = [t.uid for t in self.w.doc.acquisition_targets()] if self.w.doc is not None else []
+        if uid in included[:-1]:
+            self._on_document_changed()
 
     def _on_document_changed(self, *_args) -> None:
         panel, doc = self.panel, self.w.doc
