@@ -96,7 +96,8 @@ def available() -> list[Availability]:
                 projector_problem = default_projector_problem()
             if projector_problem:
                 hint = f"projector: {projector_problem} (pass projector='{_default_projector()}:0')"
-                entries = [Availability(e.name, False, f"{e.reason}; {hint}" if e.reason else hint) if e.ok else e for e in entries]
+                entries = [Availability(e.name, False, f"{e.reason}; {hint}" if e.reason else hint) if e.ok else e
+                           for e in entries]
         out.extend(entries)
     return out
 

@@ -52,6 +52,78 @@ class Decomposition:
     unreached_light: bool = True
     residual: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        comps, unreached, target = self.components, self.unreached, self.target
+        if not isinstance(comps, np.ndarray) or comps.dtype.kind != "f" or comps.ndim != 4:
+            raise InputError(f"components must be a float array (K, H, W, C), got {_describe(comps)}")
+        k, h, w, c = comps.shape
+        if not 1 <= k <= MAX_ORDER or min(h, w, c) < 1:
+            raise InputError(f"components must be (K, H, W, C) with K in 1..{MAX_ORDER} and H, W, C >= 1, "
+                             f"got shape {comps.shape}")
+        if not isinstance(unreached, np.ndarray) or unreached.dtype.kind != "f" or unreached.shape != (h, w, c):
+            raise InputError(f"unreached must be a float array of shape {(h, w, c)}, got {_describe(unreached)}")
+        if not isinstance(target, np.ndarray) or target.dtype != bool or target.shape != (h, w):
+            raise InputError(f"target must be a bool array of shape {(h, w)}, got {_describe(target)}")
+        if self.residual is not None and (not isinstance(self.residual, np.ndarray) or self.residual.shape != (h, w)):
+            raise InputError(f"residual must be None or an array of shape {(h, w)}, got {_describe(self.residual)}")
+        check_choice("constraint", self.constraint, Constraint)
+        if not isinstance(self.unreached_light, (bool, np.bool_)):
+            raise InputError(f"unreached_light must be True or False, got {self.unreached_light!r}")
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The decomposition as named plain arrays (no pickle needed), e.g. for a session's cache.
+
+        Returns
+        -------
+        dict
+            ``components``, ``unreached``, ``target``, ``residual`` (when there is one),
+            ``flags`` ``(1,) bool`` (``unreached_light``) and ``constraint`` ``(16,) uint8``
+            (the mode's name, space-padded). :meth:`from_arrays` reads it back.
+
+        Examples
+        --------
+        >>> d = Decomposition(np.ones((2, 1, 2, 3), np.float32), np.zeros((1, 2, 3), np.float32),
+        ...                   np.array([[True, False]]))
+        >>> back = Decomposition.from_arrays(d.to_arrays())
+        >>> back.order, back.constraint, bool(np.array_equal(back.target, d.target))
+        (2, 'ordered', True)
+        """
+        arrays = {
+            "components": self.components,
+            "unreached": self.unreached,
+            "target": self.target,
+            "flags": np.array([self.unreached_light], bool),
+            "constraint": np.frombuffer(str(self.constraint).encode().ljust(16), np.uint8),
+        }
+        if self.residual is not None:
+            arrays["residual"] = self.residual
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> Decomposition:
+        """Rebuild a decomposition from :meth:`to_arrays`' output, refusing anything malformed.
+
+        Raises
+        ------
+        InputError
+            A missing array, a wrong dtype or shape, or non-finite components.
+        """
+        missing = sorted({"components", "unreached", "target", "flags", "constraint"} - set(arrays))
+        if missing:
+            raise InputError(f"the arrays lack {missing}; not a decomposition")
+        flags, code = np.asarray(arrays["flags"]), np.asarray(arrays["constraint"])
+        if flags.shape != (1,) or flags.dtype != bool or code.dtype != np.uint8 or code.ndim != 1:
+            raise InputError("the arrays' flags or constraint are malformed; not a decomposition")
+        try:
+            constraint = bytes(code).decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise InputError("the arrays' constraint is not a mode name; not a decomposition") from None
+        d = cls(np.asarray(arrays["components"]), np.asarray(arrays["unreached"]), np.asarray(arrays["target"]),
+                constraint, bool(flags[0]), None if "residual" not in arrays else np.asarray(arrays["residual"]))
+        check_float_image("components", d.components, ndim=4)
+        check_float_image("unreached", d.unreached, ndim=3)
+        return d
+
     @property
     def order(self) -> int:
         """K, the number of inside components."""
@@ -246,6 +318,12 @@ def observe(decomposition: Decomposition, *, kappa=None, order: int | None = Non
             obs[r] += (m[r, n] * weights[n]).astype(comps.dtype) * comps[n]
     obs[0] += decomposition.unreached
     return obs
+
+
+def _describe(value) -> str:
+    if isinstance(value, np.ndarray):
+        return f"{value.dtype} array of shape {value.shape}"
+    return type(value).__name__
 
 
 def _check_observations(observations) -> np.ndarray:

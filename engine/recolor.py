@@ -60,16 +60,20 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
     out = np.empty(h * w * c, np.float32)
     tile = _TILE - _TILE % c
     weights = np.tile(kap.astype(np.float32), tile // c)
+    overflowed = []
 
     def run(start: int) -> None:
         stop = min(start + tile, out.size)
         wt = weights[: stop - start]
         acc = out[start:stop]
-        np.multiply(comps[k - 1, start:stop], wt, out=acc)
-        for i in range(k - 2, -1, -1):
-            acc += comps[i, start:stop]
-            acc *= wt
-        acc += unreached[start:stop]
+        with np.errstate(over="ignore", invalid="ignore"):  # checked below, while the tile is in cache
+            np.multiply(comps[k - 1, start:stop], wt, out=acc)
+            for i in range(k - 2, -1, -1):
+                acc += comps[i, start:stop]
+                acc *= wt
+            acc += unreached[start:stop]
+        if not np.isfinite(acc).all():
+            overflowed.append(start)
 
     starts = range(0, out.size, tile)
     if _THREADS > 1 and len(starts) > 1:
@@ -78,6 +82,11 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
     else:
         for s in starts:
             run(s)
+    if overflowed:
+        raise InputError(
+            f"recoloring with kappa {kap.tolist()} at order {k} gives values that are not finite: κ^{k} multiplies "
+            "the last interaction component beyond float32's range (or the decomposition holds non-finite "
+            "values); use a smaller kappa")
     return out.reshape(h, w, c)
 
 

@@ -15,7 +15,6 @@ every method reproduces it). Noise reduction is sized from the measured componen
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import sys
 import time
@@ -23,30 +22,30 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import kappa, resolution
+from app.cli._args import frames, kappa, order, radius, resolution
 from app.cli.main import ProgressBar
 from app.model.demo import DEMO_KAPPA, DEMO_OPTIONS, DEMO_ORDER, DEMO_TARGET
+from app.model.files import export_image, open_document
 from app.model.noise import SKIP_BELOW, denoise_radius
 from engine.acquire import Adaptive
 from engine.acquire.predict import relative_error
-from engine.denoise import denoise_components
 from engine.errors import InputError
 from engine.imageio import to_display, write_image
 from engine.recolor import recolor
 from engine.session import Session
-from engine.workflow import estimated_report, load_decomposition, run_calibration, run_capture
+from engine.workflow import (
+    edit_from_plan,
+    estimated_report,
+    load_decomposition,
+    run_calibration,
+    run_capture,
+    save_edit,
+)
 
 
 def _denoise(text: str):
-    if text == "auto":
-        return text
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a radius in pixels (0 = off), got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"the radius must be >= 0 pixels, got {value}")
-    return value
+    """'auto', or a radius in pixels (:func:`app.cli._args.radius`)."""
+    return text if text == "auto" else radius(text)
 
 
 def add_arguments(parser) -> None:
@@ -56,7 +55,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--target", default=DEMO_TARGET, help="scene target to recolor (default %(default)s)")
     parser.add_argument("--kappa", type=kappa, default=np.array(DEMO_KAPPA), metavar="R,G,B",
                         help="albedo scale (default 2,0.125,8: the paper's Fig. 6)")
-    parser.add_argument("--order", type=int, default=DEMO_ORDER, help="decomposition order K (default %(default)s)")
+    parser.add_argument("--order", type=order, default=DEMO_ORDER, help="decomposition order K (default %(default)s)")
     parser.add_argument("--resolution", type=resolution, default=(128, 128), help="camera resolution (default 128)")
     rig = parser.add_mutually_exclusive_group()
     rig.add_argument("--ideal", dest="ideal", action="store_true", default=DEMO_OPTIONS["ideal"],
@@ -67,7 +66,7 @@ def add_arguments(parser) -> None:
                         help="projector pose: co-axial with the camera, or the scene's offset pose "
                              "(default %(default)s)")
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute")
-    parser.add_argument("--frames", type=int, default=None,
+    parser.add_argument("--frames", type=frames, default=None,
                         help="frames averaged per capture (default 1 on the ideal rig, 16 on the realistic one: "
                              "κ = 8 amplifies noise 8^i at order i)")
     parser.add_argument("--denoise", type=_denoise, default="auto", metavar="auto|RADIUS",
@@ -123,35 +122,33 @@ def run(args) -> int:
         truth = rig.truth.recolor([(mask, args.kappa)])
         photo = rig.truth.photograph()
         surfaces = ~rig.truth.emitters()  # the lamp dwarfs every surface: score without it
-    d = load_decomposition(session)
+    d = result.decomposition
     raw = recolor(d, args.kappa)
-    radius, noise = denoise_radius(d)
+    size, noise = denoise_radius(d)
     if args.denoise != "auto":
-        radius = int(args.denoise)
-    if radius > 0:
-        d = denoise_components(d, result.acquisition.observations[0], radius=radius)
+        size = int(args.denoise)
+    if size > 0:
+        d = load_decomposition(session, result.key, denoise=size)
     ours = recolor(d, args.kappa)
     naive = np.where(mask[:, :, None], photo * args.kappa.astype(np.float32), photo)
     err = {name: (relative_error(img, truth, surfaces), relative_error(img, truth))
            for name, img in (("ours", ours), ("raw", raw), ("naive", naive))}
-    edit = {"scene": args.scene, "target": args.target, "kappa": args.kappa.tolist(), "order": args.order,
-            "denoise": radius, "rig": kind}
-    write_image(out / "recolored.exr", ours, metadata={"albedit.edit": edit})
+    save_edit(session, edit_from_plan(session, args.kappa, denoise=size))
+    export_image(open_document(session_path)[0], out / "recolored.exr", dtype="float")  # the edit in its metadata
     write_image(out / "recolored.png", to_display(ours))
     write_image(out / "photograph.png", to_display(photo))
     write_image(out / "truth.png", to_display(truth))
     err_img, scale = error_image(ours, truth)
     write_image(out / "error.png", err_img)
-    session.update(edit={"kappa": args.kappa.tolist()})
     estimated = estimated_report(session)
     shots = max(sum(c.name.startswith("acq-") for c in session.captures), result.captures)  # as the bar counts
-    if args.denoise == "auto" and radius == 0:
+    if args.denoise == "auto" and size == 0:
         denoised = f"off: the components' noise is {100 * noise:.2g} % of their level, below {100 * SKIP_BELOW:.0f} %"
     elif args.denoise == "auto":
-        denoised = (f"radius {radius} (chosen from the components' noise, {100 * noise:.2g} % of their level); "
+        denoised = (f"radius {size} (chosen from the components' noise, {100 * noise:.2g} % of their level); "
                     f"without it {100 * err['raw'][0]:.2f} %")
     else:
-        denoised = f"radius {radius} (asked for)" if radius else "off (asked for)"
+        denoised = f"radius {size} (asked for)" if size else "off (asked for)"
     print(
         f"{result.targets[0][1].report()}\n" + (f"{estimated}\n" if estimated else "") +
         f"images: {result.images} observation images ({result.predicted} predicted) in {shots} camera shots: "

@@ -153,7 +153,14 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         with the window), the session, the rig options.
     """
     from devices import open_rig  # the app sits above devices; imported late to keep start-up light
-    from engine.workflow import load_calibration, load_decomposition, plan_key, run_calibration, run_capture
+    from engine.workflow import (
+        decomposition_key,
+        load_calibration,
+        load_decomposition,
+        photograph_name,
+        run_calibration,
+        run_capture,
+    )
 
     options = dict(DEMO_OPTIONS, **rig_options)
     saved = {k: v for k, v in options.items() if k not in ("progress", "cache_dir")}
@@ -178,14 +185,15 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         if session.state.get("status") == "captured":  # a complete earlier start: read, don't re-run
             report(progress, 0, 1, "reading the demo's session")
             calibration = load_calibration(session)
-            photo = session.read_capture(next(c.name for c in reversed(session.captures)
-                                              if isinstance(c.meta, dict) and c.meta.get("kind") == "photograph"))
+            photo = session.read_capture(photograph_name(session))
+            key = decomposition_key(session)
+            decomposition = load_decomposition(session, key)
         else:
             calibration = run_calibration(rig, session, progress=_stage(progress, "calibrating"),
                                           should_stop=should_stop)
             result = run_capture(rig, session, [(DEMO_TARGET, targets[DEMO_TARGET])], DEMO_ORDER,
                                  progress=_stage(progress, f"acquiring {DEMO_TARGET!r}"), should_stop=should_stop)
-            photo = result.acquisition.observations[0]
+            photo, decomposition, key = result.acquisition.observations[0], result.decomposition, result.key
         photo = np.ascontiguousarray(photo, np.float32)
         doc = Document(photo, unreachable=unreachable_pixels(calibration), source=rig_name, truth=rig.truth)
         for other, mask in targets.items():  # the acquired target last: the end of its cascade
@@ -193,7 +201,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
                 t = doc.add_target(other, mask)
                 doc.set_included(t.uid, False)  # painted for reference, not measured
         t = doc.add_target(DEMO_TARGET, targets[DEMO_TARGET])
-        doc.set_acquisition([t.uid], load_decomposition(session), key=plan_key(session))
+        doc.set_acquisition([t.uid], decomposition, key=key)
         doc.set_kappa(t.uid, DEMO_KAPPA)
         _finish(doc)
         report(progress, 1, 1, "ready")

@@ -22,6 +22,7 @@ from app.model.history import History
 from app.model.target import KAPPA_MAX, KAPPA_MIN, PALETTE, BBox, DocumentEvents, Measurement, Target
 from engine.checks import check_float_image, check_kappa, check_mask
 from engine.errors import InputError
+from engine.workflow import check_targets
 
 __all__ = ["BBox", "Document", "KAPPA_MAX", "KAPPA_MIN", "Measurement", "PALETTE", "Target"]
 
@@ -149,19 +150,8 @@ class Document:
             The cascade to acquire, first to last; default the included targets in order.
         """
         uids = [t.uid for t in self.acquisition_targets()] if uids is None else list(uids)
-        if not uids:
-            raise InputError("no target to acquire: add a target, paint it and include it in the acquisition")
-        for u in uids:
-            t = self.target(u)
-            if not t.mask.any():
-                raise InputError(f"target {t.name!r} is empty: paint it before acquiring")
-        conflicts = {n: c for n, c in self.unreachable_conflicts().items() if self.by_name(n).uid in uids}
-        if conflicts:
-            listed = ", ".join(f"{n!r}: {c} px" for n, c in conflicts.items())
-            raise InputError(
-                f"targets cover pixels the projector cannot reach ({listed}); their light cannot be "
-                "re-emitted. Erase them (shown hatched) before acquiring."
-            )
+        check_targets([(self.target(u).name, self.target(u).mask) for u in uids], self.shape,
+                      unreachable=self.unreachable)
 
     # ----------------------------------------------------------------- target list
     def add_target(self, name: str | None = None, mask=None, *, kappa=1.0, index: int | None = None) -> Target:

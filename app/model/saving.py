@@ -1,9 +1,11 @@
-"""Where a document is saved: into its session, or into a new session folder. Qt-free.
+"""Where a document is saved and acquired: its session, or a new session folder. Qt-free.
 
 Saving itself (what a session holds of an edit) is :mod:`app.model.files`; this module decides
 *where*: Save writes into the document's session, Save As makes a new session folder — a copy
 of the current session (its captures and calibration stay with the edit) or, for a plain
-photograph, a new session holding the photograph.
+photograph, a new session holding the photograph. :func:`branch_session` starts a new session
+folder for a new acquisition plan when the document's session holds another one (a session
+holds one plan; the old one is never changed).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from app.model import files
 from app.model.document import Document
 from engine.errors import InputError
 from engine.session import Session
+from engine.workflow import adopt_calibration, load_calibration, open_session_for_rig, photograph_name
 
 
 def save_into(document: Document, session: Session) -> Session:
@@ -54,3 +57,31 @@ def save_as(document: Document, path, *, source: Session | None = None,
     target = Session.open(path)
     files.save_document(document, target, mark_saved=False)
     return target
+
+
+def branch_session(source: Session, path, rig, *, calibration=None) -> Session:
+    """A new session folder ``path`` for acquiring another plan with ``rig``, from ``source``.
+
+    The calibration is ``calibration`` (one made since, e.g. by the wizard) or ``source``'s; the
+    photograph capture is copied when ``source`` was taken by this rig set-up (the acquisition
+    then reuses it instead of retaking it). ``source`` is never modified.
+
+    Raises
+    ------
+    InputError
+        ``path`` exists and is not empty.
+    SessionError, InputError
+        The calibration does not fit ``rig`` (from :func:`engine.workflow.preflight` later), or a write failed.
+    """
+    path = Path(path)
+    if path.exists() and any(path.iterdir()):
+        raise InputError(f"{path} exists and is not empty: choose a new folder name")
+    new = open_session_for_rig(path, rig)
+    adopt_calibration(new, calibration if calibration is not None else load_calibration(source))
+    same_setup = (tuple(source.camera_resolution) == tuple(new.camera_resolution)
+                  and source.rig_name == new.rig_name and source.fingerprint == new.fingerprint)
+    if same_setup and source.captures:
+        name = photograph_name(source)
+        record, loaded = source.capture_record(name), source.load_capture(name)
+        new.add_capture(name, loaded.image, pattern_id=record.pattern_id, meta=record.meta, saturated=loaded.saturated)
+    return new

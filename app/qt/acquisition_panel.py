@@ -34,7 +34,7 @@ from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
 from engine.acquire import Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
-from engine.workflow import estimated_report, load_calibration, run_capture
+from engine.workflow import Unreachable, check_rig, estimated_report, load_calibration, preflight, run_capture
 
 __all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
 
@@ -132,6 +132,11 @@ class AcquisitionPanel(QWidget):
         self.fixed_kappa: list = []
         self.job: Job | None = None
         self._cancelling = False
+        self._conflict = False
+        self._error_shown = False
+        #: ``branch(reason) -> Session or None``: asked when the session holds another plan; a new
+        #: session to acquire into (the owner asks the user), or None to stay refused.
+        self.branch = None
         self._shots = 0
         self._left_out: list[str] = []
         self.result = None
@@ -232,6 +237,8 @@ class AcquisitionPanel(QWidget):
         if self.busy:
             raise InputError("cannot change the targets while an acquisition runs")
         self.targets = [(str(n), np.asarray(m, bool)) for n, m in targets]
+        if self._error_shown:  # a refusal was about the targets as they were
+            self._note("")
         self.fixed_kappa = [np.broadcast_to(np.asarray(k, float), (3,)).copy() for k in fixed_kappa]
         self._update()
 
@@ -242,15 +249,6 @@ class AcquisitionPanel(QWidget):
     def adaptive(self) -> Adaptive | None:
         policy = POLICIES[self.policy.currentIndex()][1]
         return None if policy == "brute" else Adaptive(policy, self.threshold.value() / 100.0)
-
-    def _plan(self) -> dict:
-        """The plan :func:`run_capture` will store (compared with the session's before a run)."""
-        from engine.workflow import capture_plan
-
-        return capture_plan(
-            self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
-            settings=self.capture_settings(), adaptive=self.adaptive(),
-        )
 
     def _plan_captures(self) -> list[str]:
         if self.session is None:
@@ -263,57 +261,44 @@ class AcquisitionPanel(QWidget):
 
     def _prepare(self) -> tuple[str, list, dict[str, int]]:
         """(refusal reason or "", the targets to acquire, pixels left out per target)."""
+        self._conflict = False
         if self.busy:
             return f"{self.job.name} is still running.", [], {}
         if self.rig is None:
-            return "No rig is open: open and calibrate one first (Calibrate the rig…).", [], {}
+            return "No rig is open: open and calibrate one first (Rig ▸ Calibrate Rig…).", [], {}
         if self.session is None:
-            return "No session: calibrate the rig into a session first (Calibrate the rig…).", [], {}
+            return "No session: calibrate the rig first (Rig ▸ Calibrate Rig…).", [], {}
+        calibrated = bool(self.session.read_calibration()[0])
+        if calibrated:
+            try:
+                check_rig(load_calibration(self.session), self.rig)
+            except (InputError, SessionError) as exc:  # made for another set-up (e.g. another resolution)
+                self._conflict = True
+                return f"{exc}.", [], {}
         try:
-            calibration = load_calibration(self.session)
-            calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
-                                         tuple(self.rig.projector.resolution))
-        except (SessionError, InputError) as exc:
-            return f"{exc}. Calibrate the rig into this session first (Calibrate the rig…).", [], {}
-        if not self.targets:
-            return "There is no target to acquire: paint one first.", [], {}
-        if len(self.fixed_kappa) != len(self.targets) - 1:
-            return (f"A cascade of {len(self.targets)} targets needs the fixed κ of the first "
-                    f"{len(self.targets) - 1}, got {len(self.fixed_kappa)}."), [], {}
-        targets, left_out = [], {}
-        for name, mask in self.targets:
-            if mask.shape != calibration.camera_resolution:
-                return (f"Target {name!r} is {mask.shape[1]}×{mask.shape[0]} pixels but the camera is "
-                        f"{calibration.camera_resolution[1]}×{calibration.camera_resolution[0]}."), [], {}
-            if not mask.any():
-                return f"Target {name!r} is empty: paint it first.", [], {}
-            bad = unreachable_pixels(calibration, mask)
-            if bad.any() and (not self.leave_out.isChecked() or bad.sum() == mask.sum()):
-                counts = calibration.correspondence.counts(bad)
-                why = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if n and k != "decoded")
-                return (f"Target {name!r}: {int(bad.sum())} of {int(mask.sum())} painted pixels cannot be reached "
-                        f"by the projector ({why}). Erase them from the target (the calibration's coverage map "
-                        "shows where the projector reaches), or move the projector and recalibrate."), [], {}
-            if bad.any():
-                left_out[name] = int(bad.sum())
-                mask = mask & ~bad
-            targets.append((name, mask))
-        previous = self.session.state.get("plan")
-        if previous is not None:
-            if previous != self._plan():
-                return (f"This session already holds a different acquisition plan (targets "
-                        f"{previous.get('targets')}, order {previous.get('order')}): set the same controls to "
-                        "resume it, or acquire into a new session folder."), [], {}
-            for name, mask in targets:
-                if name in self.session.masks and not np.array_equal(self.session.read_mask(name), mask):
-                    return (f"Target {name!r} was painted differently when this session's acquisition began: "
-                            "acquire the new mask into a new session folder."), [], {}
-        return "", targets, left_out
+            checked = preflight(
+                self.rig, self.session, self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
+                settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
+                unreachable=Unreachable.LEAVE_OUT if self.leave_out.isChecked() else Unreachable.REFUSE)
+        except SessionError as exc:
+            # preflight's SessionErrors: no calibration, or another plan in this (calibrated) session
+            self._conflict = calibrated and self.session.state.get("plan") is not None
+            return str(exc), [], {}
+        except InputError as exc:
+            return str(exc), [], {}
+        return "", checked.targets, checked.left_out
 
     # ------------------------------------------------------------------ run
     def start(self) -> Job | None:
         """Start (or resume) the acquisition; None and a dialog if it cannot start."""
         reason, targets, left_out = self._prepare()
+        if reason and self._conflict and self.branch is not None:
+            branched = self.branch(reason)  # the owner offers a new session folder
+            if branched is None:
+                self._note(reason, error=True)
+                return None
+            self.set_session(branched)
+            reason, targets, left_out = self._prepare()
         if reason:
             self._note(reason, error=True)
             self.refused.emit(reason)
@@ -422,6 +407,7 @@ class AcquisitionPanel(QWidget):
 
     # ------------------------------------------------------------------ display
     def _note(self, text: str, *, error: bool = False) -> None:
+        self._error_shown = error
         body = _esc(text).replace("\n", "<br>")
         self.status.setText(f"<span style='color:{_RED}'>{body}</span>" if error else body)
 

@@ -132,12 +132,15 @@ class MainWindow(QMainWindow):
         sb.addPermanentWidget(self.zoom_label)
 
     # ================================================================== document
-    def set_document(self, document: Document, session=None, *, demo: bool = False) -> None:
+    def set_document(self, document: Document, session=None, *, rig=None, demo: bool = False) -> None:
         """Show ``document`` (replacing the current one; the open rig stays open).
 
-        ``demo``: the document is the virtual-rig demo's, whose session lives in the user's
-        cache and is reused by the next demo: Save makes a copy (Save As).
+        ``rig``: use this open rig from now on (closing another one). ``demo``: the document is
+        the virtual-rig demo's, whose session lives in the user's cache and is reused by the
+        next demo: Save makes a copy (Save As).
         """
+        if rig is not None:
+            self.rigs.adopt(rig)
         self._teardown()
         self.doc, self.session, self.demo = document, session, demo
         stack = QUndoStack(self)
@@ -463,6 +466,14 @@ class MainWindow(QMainWindow):
         """Open the virtual-rig demo (File ▸ Virtual Rig Demo)."""
         if self.files.maybe_save():
             self.rigs.open_demo(rig_name)
+
+    def calibrate(self) -> None:
+        """Rig ▸ Calibrate Rig (see :meth:`RigControl.calibrate`)."""
+        self.rigs.calibrate()
+
+    def acquire(self) -> None:
+        """Rig ▸ Acquire (see :meth:`RigControl.acquire`)."""
+        self.rigs.acquire()
 
     def open_path(self, path) -> bool:
         """Open a session folder or an image (see :meth:`FileControl.open_path`)."""

@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 from PySide6.QtCore import QObject, QStandardPaths, Qt
-from PySide6.QtWidgets import QDockWidget
+from PySide6.QtWidgets import QDockWidget, QMessageBox
 
 from app.qt.acquisition_panel import AcquisitionPanel
 from app.qt.layout import scrolling
@@ -57,6 +57,7 @@ class RigControl(QObject):
         self.w = window
         self.last: tuple[str, dict] | None = self._load_last()
         self.dock: QDockWidget | None = None
+        self.calibration = None  # a calibration made since that the document's session could not take
         self.panel: AcquisitionPanel | None = None
         self._watched = None
         self.rig = rig  # the window builds its actions after this: no update yet
@@ -160,10 +161,21 @@ class RigControl(QObject):
         wizard.open()
 
     def _on_calibrated(self, wizard, session) -> None:
+        """The document uses the new calibration: its session adopts it when it has none; a session
+        calibrated otherwise is left as it is, and the next acquisition goes to a new session folder."""
+        from engine.workflow import adopt_calibration, load_calibration
+
         if self.rig is None and wizard.rig is not None:
             self.adopt(wizard.take_rig(), wizard.rig_spec()[1])
-        if self.w.session is None:
+        calibration = wizard.calibration
+        mine = self.w.session
+        if mine is None:
             self.w.session = session
+        elif Path(mine.path).resolve() != Path(session.path).resolve():
+            if not mine.read_calibration()[0]:
+                adopt_calibration(mine, calibration)  # e.g. a photograph's session: acquisition can start
+            elif load_calibration(mine).to_dict()[0] != calibration.to_dict()[0]:
+                self.calibration = calibration  # taken into the new session folder of the next acquisition
         self.follow_document()
         self.w.statusBar().showMessage(f"Calibrated into {session.path}", 10000)
         self.w._update_actions()
@@ -191,6 +203,7 @@ class RigControl(QObject):
         if self.dock is not None:
             return
         self.panel = AcquisitionPanel(self.rig, self.w.session, parent=self.w, synchronous=self.w.synchronous)
+        self.panel.branch = self._branch
         self.panel.acquired.connect(self._on_acquired)
         self.panel.busy_changed.connect(lambda busy: self.w._set_busy(busy))
         self.dock = QDockWidget("Acquisition", self.w, objectName="acquisition")
@@ -228,15 +241,49 @@ class RigControl(QObject):
         targets = [] if doc is None else doc.acquisition_targets()
         panel.set_targets([(t.name, t.mask) for t in targets], [t.kappa for t in targets[:-1]])
 
+    def _branch(self, reason: str):
+        """The session holds another plan, or a calibration of another set-up: offer a new session folder."""
+        from app.model.saving import branch_session
+        from engine.workflow import check_rig, load_calibration
+
+        old = self.w.session
+        try:
+            check_rig(load_calibration(old), self.rig)
+        except (InputError, SessionError):
+            if self.calibration is None:  # no calibration of this set-up to acquire with: calibrate first
+                return None
+        if self.w.demo:  # the demo's session lives in the cache: the new one goes where sessions go
+            base = Path(str(self.w.settings.value("wizard/sessions_dir", Path.home() / "Albedit" / "sessions")))
+            stem = base / Path(old.path).name
+        else:
+            stem = Path(old.path)
+        n = 2
+        while Path(f"{stem}-{n}").exists():
+            n += 1
+        path = Path(f"{stem}-{n}")
+        answer = QMessageBox.question(
+            self.w, "Acquire into a new session folder?",
+            f"{reason}\n\nAcquire into the new session folder {path}? The calibration is reused; "
+            f"{Path(old.path).name} is kept as it is.")
+        if answer != QMessageBox.StandardButton.Yes:
+            return None
+        try:
+            new = branch_session(old, path, self.rig, calibration=self.calibration)
+        except (InputError, SessionError, OSError) as exc:
+            self.w.show_error("Cannot make the new session folder", exc)
+            return None
+        self.calibration = None
+        self.w.session, self.w.demo = new, False
+        self.w._update_title()
+        return new
+
     def _on_acquired(self, result) -> None:
         """A finished cascade becomes the document's acquisition; the last target stays free."""
-        from engine.workflow import load_decomposition, plan_key
-
-        doc, session = self.w.doc, self.panel.session
+        doc = self.w.doc
         by_name = {t.name: t.uid for t in doc.targets}
         try:
             cascade = [by_name[name] for name, _ in result.targets]
-            doc.set_acquisition(cascade, load_decomposition(session), key=plan_key(session))
+            doc.set_acquisition(cascade, result.decomposition, key=result.key)
         except (KeyError, InputError, SessionError) as exc:
             self.w.show_error("Cannot use the acquisition", exc)
             return

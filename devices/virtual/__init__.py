@@ -55,8 +55,8 @@ class VirtualRig(Rig):
         The precomputed transport (for tests and benchmarks).
     """
 
-    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer):
-        super().__init__(name, camera, projector, targets=targets, truth=truth)
+    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer, fingerprint=None):
+        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
         self._renderer = renderer
         self.scene: Scene = renderer.scene
         self.setup: Setup = renderer.setup
@@ -172,7 +172,9 @@ def open_rig(arg: str, **options) -> VirtualRig:
     name = f"virtual:{arg}"
     camera = VirtualCamera(renderer, projector, cmodel, np.random.default_rng(seed), name)
     truth = Truth(renderer, pmodel, cmodel, pres)
-    return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer)
+    fingerprint = {"scene": scene.digest, "projector pose": kind, "ideal": ideal, "patch size": float(patch)}
+    return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer,
+                      fingerprint=fingerprint)
 
 
 def target_masks(scene: Scene, setup: Setup) -> dict[str, np.ndarray]:

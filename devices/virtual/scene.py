@@ -43,6 +43,11 @@ from engine.errors import InputError
 
 SCENE_DIR = Path(__file__).resolve().parents[2] / "resources" / "scenes"
 
+#: Largest scene file read (scenes are a few kB; this keeps a wrong path such as a device from being read).
+MAX_SCENE_BYTES = 16 * 1024 * 1024
+#: Largest radiance a surface may emit and projector power (far beyond any camera's full scale).
+MAX_RADIANCE = 1e6
+
 _TOP_KEYS = {"name", "description", "camera", "projector", "surfaces", "boxes", "targets",
              "lighting", "patch_size"}
 
@@ -147,13 +152,19 @@ def load_scene(name_or_path: str | Path) -> Scene:
         if not path.is_file():
             raise InputError(f"unknown virtual scene {text!r}; expected one of {scene_names()} or a path to a .json file")
     try:
+        if not path.is_file():
+            raise InputError(f"scene file {str(path)!r} is not a regular file")
+        if path.stat().st_size > MAX_SCENE_BYTES:
+            raise InputError(f"scene file {str(path)!r} is larger than {MAX_SCENE_BYTES} bytes; a scene is a few kB")
         raw = path.read_text(encoding="utf-8")
-    except OSError as exc:
+    except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read scene file {str(path)!r}: {exc}") from None
     try:
         data = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise InputError(f"scene file {str(path)!r} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"scene file {str(path)!r} nests its JSON too deeply to be a scene") from None
     return parse_scene(data, default_name=path.stem)
 
 
@@ -178,7 +189,7 @@ def parse_scene(data: dict, *, default_name: str = "scene") -> Scene:
         raise InputError(f"name must be a non-empty string, got {name!r}")
     camera = _pose(data["camera"], "camera")
     proj = _obj(data["projector"], "projector", required=(), optional=("power", "offset"))
-    power = _vec(proj.get("power", [1.0, 1.0, 1.0]), "projector.power", 3, lo=0.0, lo_open=True)
+    power = _vec(proj.get("power", [1.0, 1.0, 1.0]), "projector.power", 3, lo=0.0, lo_open=True, hi=MAX_RADIANCE)
     offset = _pose(proj["offset"], "projector.offset") if "offset" in proj else None
 
     origins, us, vs, names, albedo, emission, paths = [], [], [], [], [], [], []
@@ -194,7 +205,7 @@ def parse_scene(data: dict, *, default_name: str = "scene") -> Scene:
         vs.append(corners[3] - corners[0])
         names.append(_name(s["name"], f"{where}.name"))
         albedo.append(_albedo(s["albedo"], f"{where}.albedo"))
-        emission.append(_vec(s.get("emission", [0, 0, 0]), f"{where}.emission", 3, lo=0.0))
+        emission.append(_vec(s.get("emission", [0, 0, 0]), f"{where}.emission", 3, lo=0.0, hi=MAX_RADIANCE))
         paths.append(where)
     boxes = data.get("boxes", [])
     if not isinstance(boxes, list):
@@ -278,9 +289,16 @@ def _name(value, where: str) -> str:
 
 
 def _number(value, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise InputError(f"{where} must be a finite number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(_float(value)):
+        raise InputError(f"{where} must be a finite number, got {value!r:.40}")
     return float(value)
+
+
+def _float(value) -> float:
+    try:
+        return float(value)
+    except OverflowError:  # an integer beyond float range (10**400)
+        return float("inf")
 
 
 def _vec(value, where: str, n: int, *, lo=None, hi=None, lo_open=False) -> np.ndarray:
@@ -288,9 +306,9 @@ def _vec(value, where: str, n: int, *, lo=None, hi=None, lo_open=False) -> np.nd
         isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
     if not ok:
         raise InputError(f"{where} must be a list of {n} numbers, got {value!r:.80}")
-    arr = np.array(value, np.float64)
+    arr = np.array([_float(v) for v in value], np.float64)
     if not np.all(np.isfinite(arr)):
-        raise InputError(f"{where} must be finite, got {value}")
+        raise InputError(f"{where} must be finite, got {value!r:.80}")
     if lo is not None and (np.any(arr <= lo) if lo_open else np.any(arr < lo)):
         raise InputError(f"{where} must be {'>' if lo_open else '>='} {lo}, got {value}")
     if hi is not None and np.any(arr > hi):
@@ -300,7 +318,9 @@ def _vec(value, where: str, n: int, *, lo=None, hi=None, lo_open=False) -> np.nd
 
 def _albedo(value, where: str) -> np.ndarray:
     arr = _vec(value, where, 3)
-    if np.any(arr < 0) or np.any(arr >= 1):
+    if np.any(arr < 0):
+        raise InputError(f"{where} must be in [0, 1), got {value} (a negative albedo reflects negative light)")
+    if np.any(arr >= 1):
         raise InputError(f"{where} must be in [0, 1), got {value} (an albedo of 1 or more creates energy)")
     return arr
 
@@ -327,9 +347,9 @@ def _corners(value, where: str) -> np.ndarray:
         for c in value)
     if not ok:
         raise InputError(f"{where} must be a list of 4 points [x, y, z], got {value!r:.80}")
-    p = np.array(value, np.float64)
+    p = np.array([[_float(x) for x in c] for c in value], np.float64)
     if not np.all(np.isfinite(p)):
-        raise InputError(f"{where} must be finite, got {value}")
+        raise InputError(f"{where} must be finite, got {value!r:.80}")
     scale = max(float(np.ptp(p, axis=0).max()), 1e-12)
     u, v = p[1] - p[0], p[3] - p[0]
     area = float(np.linalg.norm(np.cross(u, v)))

@@ -33,9 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
-import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -44,9 +42,13 @@ import scipy.sparse as sp
 
 from devices.virtual.geometry import Quads, View, blocker_table, cast_rays, occluded, polygon_form_factor, quad_corners
 from devices.virtual.scene import Scene
+from engine.errors import InputError
+from engine.imageio import atomic_write
 from engine.progress import report
 
 MODEL_VERSION = 8
+#: Most patches a scene may be cut into: their transport is dense in patches (memory ~ patches²).
+MAX_PATCHES = 8000
 
 # Shadow rays per edge of a patch (form factors) and of a light (ambient light).
 VIS_SAMPLES = 3
@@ -165,9 +167,22 @@ def views(scene: Scene, geometry: Geometry) -> tuple[View, View]:
 
 
 def patch_grid(scene: Scene, patch_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Patch counts along ``u`` and ``v`` of every quad, and each quad's first patch index."""
-    nu = np.maximum(1, np.ceil(np.linalg.norm(scene.quads.u, axis=1) / patch_size - 1e-9)).astype(np.int64)
-    nv = np.maximum(1, np.ceil(np.linalg.norm(scene.quads.v, axis=1) / patch_size - 1e-9)).astype(np.int64)
+    """Patch counts along ``u`` and ``v`` of every quad, and each quad's first patch index.
+
+    Raises
+    ------
+    InputError
+        More than :data:`MAX_PATCHES` patches (their transport would not fit in memory); the
+        message gives the smallest patch size that fits.
+    """
+    fu = np.maximum(1.0, np.ceil(np.linalg.norm(scene.quads.u, axis=1) / patch_size - 1e-9))
+    fv = np.maximum(1.0, np.ceil(np.linalg.norm(scene.quads.v, axis=1) / patch_size - 1e-9))
+    count = float(np.sum(fu * fv))
+    if count > MAX_PATCHES:
+        fits = patch_size * np.sqrt(count / MAX_PATCHES)
+        raise InputError(f"patch_size {patch_size:g} m cuts scene {scene.name!r} into {count:.3g} patches; at most "
+                         f"{MAX_PATCHES} fit in memory: use a patch_size of at least {fits:.2g} m")
+    nu, nv = fu.astype(np.int64), fv.astype(np.int64)
     offset = np.concatenate([[0], np.cumsum(nu * nv)])
     return nu, nv, offset
 
@@ -218,18 +233,16 @@ def _key(obj) -> str:
 
 
 def _save_arrays(path: Path, arrays: dict) -> None:
-    """Write ``arrays`` to ``path`` atomically (temp file + rename); failures only cost time."""
+    """Write ``arrays`` to ``path`` atomically (:func:`engine.imageio.atomic_write`); failures only cost time."""
     arrays = dict(arrays, version=np.array(MODEL_VERSION))
+
+    def writer(temp: Path) -> None:
+        with open(temp, "wb") as fh:
+            np.savez(fh, **arrays)
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(path, writer)
     except OSError:
         pass
 

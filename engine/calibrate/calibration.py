@@ -13,6 +13,7 @@ from engine.calibrate.graycode import Correspondence
 from engine.calibrate.response import ProjectorResponse
 from engine.checks import check_image, check_resolution
 from engine.errors import InputError
+from engine.rig import fingerprint_differences
 
 __all__ = ["CALIBRATION_VERSION", "Calibration"]
 
@@ -79,8 +80,12 @@ class Calibration:
         object.__setattr__(self, "black_frame", black)
         object.__setattr__(self, "metadata", dict(self.metadata))
 
-    def check_compatible(self, rig_name: str, camera_resolution, projector_resolution) -> None:
+    def check_compatible(self, rig_name: str, camera_resolution, projector_resolution,
+                         fingerprint: dict | None = None) -> None:
         """Raise InputError saying why this calibration does not fit a rig.
+
+        ``fingerprint`` is the rig's (:func:`engine.rig.fingerprint_of`); it is compared with
+        the one recorded in ``metadata["rig_fingerprint"]`` when the calibration has one.
 
         Examples
         --------
@@ -108,6 +113,12 @@ class Calibration:
                 f"calibration was made for projector {wh(self.projector_resolution)}, this rig's projector is "
                 f"{wh(proj)}; recalibrate"
             )
+        made_with = self.metadata.get("rig_fingerprint")
+        if fingerprint is not None and isinstance(made_with, dict):
+            differences = fingerprint_differences(made_with, fingerprint)
+            if differences:
+                raise InputError(f"calibration was made with another set-up of rig {rig_name!r}: "
+                                 f"{'; '.join(differences)}; recalibrate")
 
     def to_dict(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """Split into a JSON-serialisable description and named arrays (no pickle).

@@ -9,6 +9,7 @@ from engine.calibrate import PixelStatus
 from engine.errors import Cancelled, InputError
 from engine.recolor import recolor
 from engine.session import Session
+from engine.session.edit import mask_digest, mask_name
 from engine.workflow import load_decomposition, run_calibration, run_capture
 
 RES = (48, 48)
@@ -181,9 +182,10 @@ def test_a_repainted_target_is_a_different_plan(rig, tmp_path):
         run_calibration(r, s)
         mask = r.targets["right_wall"]
         run_capture(r, s, [("right_wall", mask)], 2)
-        before = s.read_mask("right_wall")
+        stored = mask_name("right_wall", mask_digest(mask))
+        before = s.read_mask(stored)
         smaller = mask.copy()
         smaller[np.argwhere(mask)[0][0]] = False
         with pytest.raises(SessionError, match="different acquisition plan"):
             run_capture(r, s, [("right_wall", smaller)], 2)
-        np.testing.assert_array_equal(Session.open(tmp_path / "s").read_mask("right_wall"), before)
+        np.testing.assert_array_equal(Session.open(tmp_path / "s").read_mask(stored), before)

@@ -49,10 +49,16 @@ from app.qt.calibration_wizard.exposure_page import ExposurePage
 from app.qt.calibration_wizard.setup_pages import ProjectorPage, RigPage
 from app.qt.layout import fit_to_screen
 from app.qt.worker import Job, UiCaller, run_on_rig
-from engine.errors import InputError, SessionError
+from engine.errors import InputError
 from engine.progress import checkpoint
 from engine.session import Session
-from engine.workflow import load_calibration, open_session_for_rig, run_calibration, save_calibration
+from engine.workflow import (
+    adopt_calibration,
+    calibration_problems,
+    load_compatible_calibration,
+    open_session_for_rig,
+    run_calibration,
+)
 
 __all__ = ["CalibrationWizard"]
 
@@ -342,15 +348,8 @@ class CalibrationWizard(QWizard):
         if not path:
             return False, "Choose a calibrated session folder first."
         try:
-            calibration = load_calibration(Session.open(path))
-            calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
-                                         tuple(self.rig.projector.resolution))
-            mine = self.session.read_calibration()[0]
-            if mine and mine != calibration.to_dict()[0]:
-                raise SessionError(f"session {self.session.path} already has a different calibration; "
-                                   "use a new session folder")
-            if not mine:
-                save_calibration(self.session, calibration)
+            calibration = load_compatible_calibration(path, self.rig)
+            adopt_calibration(self.session, calibration)
         except Exception as exc:  # noqa: BLE001 - the refusal is shown in the engine's words
             return False, f"Refused: {error_text(exc)}"
         self.calibration, self.failure = calibration, None
@@ -363,25 +362,8 @@ class CalibrationWizard(QWizard):
         out = []
         if self.failure is not None:
             out.append((error_text(self.failure), fix_for(self.failure)))
-        cal = self.calibration
-        if cal is not None:
-            counts = cal.correspondence.counts()
-            total = max(sum(counts.values()), 1)
-            if counts["decoded"] < 0.98 * total:
-                fixes = ["targets can only be edited where the projector reaches: keep them on the green "
-                         "pixels of the coverage map"]
-                if counts["unlit"]:
-                    fixes.append("unlit pixels are in the projector's shadow: targets there cannot be edited; "
-                                 "place the projector closer to the camera's viewpoint")
-                if counts["low_contrast"]:
-                    fixes.append("low contrast: focus the projector, lengthen the exposure, darken the room")
-                if counts["out_of_range"]:
-                    fixes.append("out of range codes come from noise or strong indirect light: darken the room")
-                out.append((cal.correspondence.summary(), "; ".join(fixes) + "."))
-            exposure = str(cal.metadata.get("exposure", ""))
-            if exposure and not exposure.startswith("ok"):
-                out.append((f"Exposure: {exposure}", "Go back to the exposure page, adjust, and calibrate into a "
-                            "new session folder."))
+        if self.calibration is not None:
+            out += calibration_problems(self.calibration)
         return out
 
     def summary_html(self) -> str:

@@ -199,16 +199,14 @@ class ProjectorPage(QWizardPage):
         else:
             self.screens.show()
             try:
-                from devices.qtscreen import list_screens
-
-                found = list_screens()
+                found = [a for a in devices.available_projectors() if a.ok]
             except Exception as exc:  # noqa: BLE001 - shown, the rig then opens with its default
                 found = []
                 self.note.setText(red(f"Cannot list screens ({error_text(exc)}); the rig opens with its default "
                                       "projector."))
-            for s in found:
-                item = QListWidgetItem(str(s))
-                item.setData(Qt.ItemDataRole.UserRole, s.index)
+            for a in found:  # "qtscreen:1 — HDMI-1 1024x768": every projector a registered backend offers
+                item = QListWidgetItem(f"{a.name} — {a.reason}" if a.reason else a.name)
+                item.setData(Qt.ItemDataRole.UserRole, a.name)
                 self.screens.addItem(item)
             if found:
                 self.note.setText("The projector is a full-screen window on one of these screens (usually not "
@@ -219,7 +217,7 @@ class ProjectorPage(QWizardPage):
         item = self.screens.currentItem()
         if self.screens.isHidden() or item is None:
             return {}
-        return {"projector": f"qtscreen:{item.data(Qt.ItemDataRole.UserRole)}"}
+        return {"projector": item.data(Qt.ItemDataRole.UserRole)}
 
     def isComplete(self) -> bool:  # noqa: N802 (Qt name)
         return not self.w.busy

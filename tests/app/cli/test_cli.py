@@ -37,7 +37,7 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     for name in ("recolored.exr", "recolored.png", "truth.png", "error.png", "photograph.png"):
         assert (out / name).exists(), name
     assert read_image(out / "recolored.exr").shape == (32, 32, 3)
-    assert "albedit.edit" in read_metadata(out / "recolored.exr")
+    assert read_metadata(out / "recolored.exr")["edit"]["kappa"] == [2.0, 0.125, 8.0]
     # the headless recolor of the demo's session writes the same image
     again = _run("recolor", str(out / "session"), "--kappa", "2,0.125,8", "-o", str(tmp_path / "again.exr"))
     assert again.returncode == 0, again.stderr
@@ -75,3 +75,22 @@ def test_a_calibration_is_reused_across_sessions_of_the_same_rig_only(tmp_path):
     assert other.returncode == 1
     assert "calibration was made for camera 24×24" in other.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "s3").exists()
+
+
+def test_an_edit_saved_by_the_app_exports_from_the_command_line(acquired_doc, tmp_path):
+    from app.cli.main import run_command
+    from app.model import files
+
+    doc = acquired_doc
+    doc.rename_target(doc.by_name("wall").uid, "Wand — links")  # any text a user can type
+    doc.set_kappa(doc.by_name("Wand — links").uid, (2.0, 0.125, 1.5))
+    doc.add_target()  # the app's default name, "target 3", never acquired
+    files.create_session(tmp_path / "s", doc)
+    files.export_image(doc, tmp_path / "app.exr", dtype="float")
+    assert run_command(["export", str(tmp_path / "s"), "-o", str(tmp_path / "cli.exr")]) == 0
+    np.testing.assert_array_equal(read_image(tmp_path / "cli.exr"), read_image(tmp_path / "app.exr"))
+    app_meta, cli_meta = read_metadata(tmp_path / "app.exr"), read_metadata(tmp_path / "cli.exr")
+    assert list(app_meta) == list(cli_meta) == ["edit"]
+    assert cli_meta == app_meta and cli_meta["edit"]["source"] == "synthetic"
+    assert cli_meta["edit"]["cascade"] == ["floor", "Wand — links"] and cli_meta["edit"]["kappa"] == [2.0, 0.125, 1.5]
+    assert [t["name"] for t in cli_meta["edit"]["targets"]] == ["floor", "Wand — links", "target 3"]

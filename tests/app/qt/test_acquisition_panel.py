@@ -19,6 +19,7 @@ from engine.acquire import CaptureSettings  # noqa: E402
 from engine.acquire.target import pattern_budget  # noqa: E402
 from engine.calibrate import PixelStatus  # noqa: E402
 from engine.session import Session  # noqa: E402
+from engine.session.edit import mask_digest, mask_name  # noqa: E402
 from engine.workflow import load_calibration, load_decomposition, run_calibration  # noqa: E402
 
 RES = 24
@@ -239,7 +240,8 @@ def test_leave_out_trims_only_the_unreachable_pixels(wedge_offset, make_panel, q
     assert panel.check_ready() == ""
     with qtbot.waitSignal(panel.acquired, timeout=TIMEOUT_MS):
         panel.start_button.click()
-    np.testing.assert_array_equal(Session.open(session.path).read_mask("left"), painted & ~bad)
+    stored = mask_name("left", mask_digest(painted & ~bad))
+    np.testing.assert_array_equal(Session.open(session.path).read_mask(stored), painted & ~bad)
     assert f"{int(bad.sum())} pixels of 'left' the projector cannot reach were left out" in panel.status.text()
     assert dialogs == []
 

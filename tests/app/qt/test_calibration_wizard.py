@@ -374,3 +374,31 @@ def test_the_main_window_wizard_starts_from_the_document_and_remembers(make_wind
     assert w.rig_page.rigs.isHidden() and w.rig_page.rigs_label.isHidden()
     w.reject()
     assert window.rig is not None  # the wizard never closes a rig it was given
+
+
+@pytest.mark.parametrize(
+    "name, words",
+    [
+        ("gphoto2", "opening the camera failed: no camera found: check that it is connected by USB"),
+        ("harvesters:/no/such/maker.cti", "no GenTL producer file at '/no/such/maker.cti'"),
+        ("opencv:97", "no camera at index 97 (not attached, or in use by another program)"),
+    ],
+)
+def test_a_camera_that_cannot_open_is_shown_in_the_engines_words(make_wizard, name, words):
+    """The real libraries' failures with no device reach the wizard as one plain message."""
+    if name == "gphoto2":
+        from devices.gphoto2_camera import list_cameras
+        from engine.errors import DeviceError
+
+        try:
+            attached = list_cameras()
+        except DeviceError:  # python-gphoto2 not installed: the wizard says so instead
+            attached, words = [], "python-gphoto2 is not installed"
+        if attached:
+            pytest.skip("a camera is connected to this machine")
+    w = make_wizard()
+    w.rig_page.rig_name.setText(name)
+    w.next()
+    w.next()  # opening fails: the wizard stays on the projector page with the message
+    assert w.currentId() == w.PAGE_PROJECTOR and w.rig is None
+    assert words in w.projector_page.status.text()
