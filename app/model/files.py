@@ -51,6 +51,10 @@ EXPORT_FORMATS = {
 }
 
 
+class ExportNeedsClipping(InputError):
+    """An integer export would clip values: :func:`export_image` with ``clip=True`` clips and counts them."""
+
+
 # ----------------------------------------------------------------------------- opening
 
 
@@ -80,8 +84,12 @@ def open_document(path, *, history=None) -> tuple[Document, Session | None, list
         doc, warnings = _document_from_session(session, history=history)
         return doc, session, warnings
     image = imageio.read_image(path)
-    if image.ndim != 3 or image.shape[2] < 3:
-        raise InputError(f"{path}: an RGB image is needed, got shape {image.shape}")
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
+        raise InputError(f"{path}: a grey or RGB image is needed, got shape {image.shape}")
+    if image.shape[2] < 3:  # grey (and alpha): the same light in every channel
+        image = np.repeat(image[..., :1], 3, axis=2)
     doc = Document(np.ascontiguousarray(image[..., :3]), history=history, source=str(path))
     return doc, None, []
 
@@ -290,7 +298,9 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
     Raises
     ------
     InputError
-        Nothing acquired, unsupported format/dtype, values out of range for uint16.
+        Nothing acquired, unsupported format/dtype.
+    ExportNeedsClipping
+        Values out of range for a uint16 TIFF without ``clip`` (an :class:`InputError` too).
     Cancelled
         Stopped before the write started (nothing written).
     """
@@ -317,7 +327,7 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
         pixels = image * np.float32(2.0**exposure)
         over = int(np.count_nonzero((pixels > 1.0) | (pixels < 0.0)))
         if over and not clip:
-            raise InputError(
+            raise ExportNeedsClipping(
                 f"{over} values fall outside [0, 1] after an exposure of {exposure:+g} stops and a 16-bit TIFF "
                 "cannot hold them: lower the exposure, export float, or allow clipping"
             )

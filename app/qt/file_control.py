@@ -14,7 +14,6 @@ from PySide6.QtWidgets import QFileDialog, QMessageBox
 
 from app import APP_NAME
 from app.model import files, saving
-from engine.errors import InputError
 from engine.imageio import RAW_EXTENSIONS
 from engine.progress import checkpoint
 
@@ -134,7 +133,7 @@ class FileControl(QObject):
         exposure = self.w.exposure_spin.value()
 
         def failed(exc):
-            if isinstance(exc, InputError) and "allow clipping" in str(exc) and not clip:
+            if isinstance(exc, files.ExportNeedsClipping) and not clip:
                 answer = QMessageBox.question(self.w, "Export", f"{exc}\n\nClip those values to 1 and export anyway?")
                 if answer == QMessageBox.StandardButton.Yes:
                     QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True))

@@ -46,3 +46,29 @@ def test_an_exception_escaping_a_slot_fails_the_test(qtbot):
     with qtbot.captureExceptions() as caught:
         button.click()
     assert len(caught) == 1 and caught[0][0] is IndexError
+
+
+def test_a_greyscale_photograph_opens_as_grey_rgb(make_window, qtbot, tmp_path):
+    """Defect 14: a greyscale PNG was refused ("an RGB image is needed, got shape (300, 400, 1)")."""
+    from engine import imageio
+
+    grey = np.linspace(0, 1, 12 * 16, dtype=np.float32).reshape(12, 16)
+    imageio.write_image(tmp_path / "grey.png", imageio.to_display(np.repeat(grey[..., None], 3, 2))[..., :1])
+    window = make_window()
+    assert window.open_path(tmp_path / "grey.png")
+    photo = window.doc.photograph
+    assert photo.shape == (12, 16, 3)
+    np.testing.assert_array_equal(photo[..., 0], photo[..., 1])
+    np.testing.assert_array_equal(photo[..., 0], photo[..., 2])
+
+
+def test_an_export_that_needs_clipping_says_so_by_its_type(acquired_doc, tmp_path):
+    """Issue 12: the window asked about clipping by matching the message text."""
+    import pytest
+
+    from app.model import files
+
+    acquired_doc.set_kappa(acquired_doc.by_name("wall").uid, 16.0)
+    with pytest.raises(files.ExportNeedsClipping, match="allow clipping"):
+        files.export_image(acquired_doc, tmp_path / "x.tif", dtype="uint16", exposure=8.0)
+    assert files.export_image(acquired_doc, tmp_path / "x.tif", dtype="uint16", exposure=8.0, clip=True).exists()
