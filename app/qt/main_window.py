@@ -156,6 +156,7 @@ class MainWindow(QMainWindow):
         self.canvas = Canvas(document, self.painter)
         self.canvas.setObjectName("canvas")
         self.setCentralWidget(self.canvas)
+        self.canvas.show()  # now, not on the next event-loop turn (the focus cannot go to a hidden widget)
         self.canvas.setFocus()  # single-key shortcuts (tools, views) work at once
         self.preview = PreviewController(document, max_shape=self._screen_shape(), synchronous=self.synchronous,
                                          parent=self)
