@@ -80,7 +80,10 @@ class User:
                     QApplication.sendEvent(widget, QKeyEvent(kind, 0, Qt.KeyboardModifier.NoModifier, ch))
 
     def press(self, key, modifiers=Qt.KeyboardModifier.NoModifier) -> None:
-        """A key press where the keyboard focus is (as a person presses a shortcut)."""
+        """A key press where the keyboard focus is (as a person presses a shortcut), in the active window."""
+        if not self.window.isActiveWindow():  # e.g. after a dialog closed: a person clicks the window first
+            self.window.activateWindow()
+            self.qtbot.waitUntil(self.window.isActiveWindow, timeout=5000)
         target = QApplication.focusWidget() or self.window
         self.qtbot.keyClick(target, key, modifiers)
 
