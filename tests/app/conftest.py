@@ -87,7 +87,8 @@ def make_window(qtbot, tmp_path):
 
     def make(document=None, session=None, **kw):
         settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-        w = MainWindow(document, session, synchronous=True, settings=settings, **kw)
+        kw.setdefault("synchronous", True)
+        w = MainWindow(document, session, settings=settings, **kw)
         w.resize(1200, 800)
         w.show()
         qtbot.waitExposed(w)
