@@ -1,5 +1,7 @@
 """The app's one home for threads, long jobs, their progress and their waits.
 
+(About 530 lines: issue 12 asks for one module holding every job, wait and progress display.)
+
 Engine and device calls stay synchronous; they take ``progress(step, total, message)`` and
 ``should_stop()`` (see :mod:`engine.progress`). This module runs them off the UI thread and
 brings results back as Qt signals, delivered on the UI thread by queued connections.
