@@ -42,11 +42,12 @@ DEMO_ORDER = 4
 DEMO_OPTIONS: dict[str, Any] = {"ideal": True, "projector": "coaxial", "seed": 0}
 #: Demo sessions kept in the cache folder (the one in use and the most recent others).
 KEEP = 2
-#: Square resolutions the app's demo picks from (:func:`demo_resolution`). Others decode worse: on
-#: the ideal co-axial Cornell box the Gray code leaves pixels of the right wall near the short box
-#: unmeasured (they keep their colour) — 640²: 7443 (11 %), 896²: 1216; 768²: 751, 1024²: 961
-#: (≈ 0.6 %); 256², 512²: none.
-SIDES = (256, 512, 768, 1024)
+#: Square resolutions the app's demo picks from (:func:`demo_resolution`): at most 512², because
+#: on the ideal co-axial Cornell box the Gray code does not decode the right wall next to the back
+#: wall's corner beyond what acquisition estimates from neighbours (3 px), and those pixels keep
+#: their green: 640²: 7443 of 66804 wall pixels, 768²: 751, 896²: 1216, 1024²: 961 — a visible
+#: streak; 256² and 512²: none. A 512² demo is drawn smoothed (at 109–125 % on common windows).
+SIDES = (256, 512)
 
 
 @dataclass
@@ -65,15 +66,15 @@ def default_folder() -> Path:
 
 
 def demo_resolution(canvas: tuple[int, int]) -> tuple[int, int]:
-    """The square demo resolution that fills a canvas of ``canvas`` (h, w) device pixels at ≤ 100 %.
+    """The square demo resolution for a canvas of ``canvas`` (h, w) device pixels.
 
-    The smallest of :data:`SIDES` at least as large as the canvas's shorter side, so the
-    fitted picture is shown at 100 % or less (no magnified staircase edges).
+    The smallest of :data:`SIDES` at least as large as the canvas's shorter side (shown at 100 %
+    or less), else the largest of them.
 
     Examples
     --------
-    >>> demo_resolution((560, 900)), demo_resolution((900, 1400)), demo_resolution((3000, 5000))
-    ((768, 768), (1024, 1024), (1024, 1024))
+    >>> demo_resolution((200, 300)), demo_resolution((480, 900)), demo_resolution((900, 1400))
+    ((256, 256), (512, 512), (512, 512))
     """
     side = min(int(canvas[0]), int(canvas[1]))
     s = next((s for s in SIDES if s >= side), SIDES[-1])

@@ -168,6 +168,7 @@ class MainWindow(QMainWindow):
         self.preview.failed.connect(lambda msg: self.statusBar().showMessage(msg, 8000))
         self.canvas.cursor_moved.connect(self._on_cursor)
         self.canvas.zoom_changed.connect(lambda z: self.zoom_label.setText(f"{100 * z:.0f} %"))
+        self.zoom_label.setText(f"{100 * self.canvas.zoom:.0f} %")  # the fit already happened
         self.target_panel = TargetPanel(document)
         self.target_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         self.albedo_panel = AlbedoPanel(document)
