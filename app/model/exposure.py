@@ -150,7 +150,8 @@ class ExposureController:
                 self._stop(f"This camera does not clip (it returns radiance): every exposure gives the same data; "
                            f"kept {1000 * f.exposure:.4g} ms.")
             else:
-                self._stop(f"Auto exposure settled at {1000 * f.exposure:.4g} ms after {self.frames} frames (the "
+                frames = f"{self.frames} frame" + ("s" if self.frames != 1 else "")
+                self._stop(f"Auto exposure settled at {1000 * f.exposure:.4g} ms after {frames} (the "
                            "brightest projector-lit pixels at 80 % of full scale; a lamp in view may clip: captures "
                            "complete it from shorter exposures).")
         elif self.frames >= self.max_frames:

@@ -168,11 +168,12 @@ class AcquisitionPanel(QWidget):
         self.targets_label = QLabel(objectName="acquire_targets")
         self.targets_label.setWordWrap(True)
         self.start_button = QPushButton("Start", objectName="acquire_start")
-        self.eta = JobProgress("acquire_progress", unit="camera shots", stacked=True)
+        self.eta = JobProgress("acquire_progress", unit="camera shots", stacked=True, buttons=False)
         self.pause_button, self.cancel_button = self.eta.pause, self.eta.cancel
         buttons = QHBoxLayout()
-        buttons.addWidget(self.start_button)
-        buttons.addWidget(self.eta, 1)
+        for b in (self.start_button, self.pause_button, self.cancel_button):
+            buttons.addWidget(b)
+        buttons.addStretch(1)
         self.thumbnails = ThumbnailStrip(size=thumb_size)
         self.thumbnails.setObjectName("acquire_thumbnails")
         self.status = QLabel(objectName="acquire_status")
@@ -182,6 +183,7 @@ class AcquisitionPanel(QWidget):
         lay.addWidget(self.targets_label)
         lay.addLayout(form)
         lay.addLayout(buttons)
+        lay.addWidget(self.eta)
         lay.addWidget(self.thumbnails)
         lay.addWidget(self.status)
         lay.addStretch(1)

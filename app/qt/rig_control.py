@@ -11,6 +11,7 @@ changes, and the calibration wizard starts from the document's rig and resolutio
 from __future__ import annotations
 
 import json
+from datetime import datetime
 from pathlib import Path
 
 from PySide6.QtCore import QObject, QStandardPaths, Qt
@@ -207,7 +208,11 @@ class RigControl(QObject):
         self.panel.acquired.connect(self._on_acquired)
         self.panel.busy_changed.connect(lambda busy: self.w._set_busy(busy))
         self.dock = QDockWidget("Acquisition", self.w, objectName="acquisition")
-        self.dock.setWidget(scrolling(self.panel, "acquisition_scroll"))
+        area = scrolling(self.panel, "acquisition_scroll")
+        self.dock.setWidget(area)
+        # a short dock scrolls to what matters now: the progress while it runs, the outcome after
+        self.panel.started.connect(lambda _job: area.ensureWidgetVisible(self.panel.eta))
+        self.panel.busy_changed.connect(lambda busy: busy or area.ensureWidgetVisible(self.panel.status))
         self.w.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, self.dock)
 
     def follow_document(self) -> None:
@@ -254,17 +259,17 @@ class RigControl(QObject):
                 return None
         if self.w.demo:  # the demo's session lives in the cache: the new one goes where sessions go
             base = Path(str(self.w.settings.value("wizard/sessions_dir", Path.home() / "Albedit" / "sessions")))
-            stem = base / Path(old.path).name
+            stem = base / f"demo-{datetime.now():%Y%m%d-%H%M%S}"
+            kept = "the demo's session"
         else:
-            stem = Path(old.path)
-        n = 2
-        while Path(f"{stem}-{n}").exists():
-            n += 1
-        path = Path(f"{stem}-{n}")
+            stem, kept = Path(old.path), Path(old.path).name
+        path, n = stem, 2
+        while path.exists():
+            path, n = Path(f"{stem}-{n}"), n + 1
         answer = QMessageBox.question(
             self.w, "Acquire into a new session folder?",
-            f"{reason}\n\nAcquire into the new session folder {path}? The calibration is reused; "
-            f"{Path(old.path).name} is kept as it is.")
+            f"{reason[:1].upper()}{reason[1:]}\n\nAcquire into a new session folder, {path}? The calibration "
+            f"is reused and {kept} is kept as it is.")
         if answer != QMessageBox.StandardButton.Yes:
             return None
         try:
@@ -289,8 +294,8 @@ class RigControl(QObject):
             return
         self.w.preview.rebuild()
         self.w.statusBar().showMessage(
-            f"Acquired {result.images} images ({result.predicted} predicted); drag the κ sliders of "
-            f"{result.targets[-1][0]!r}", 15000)
+            f"Acquired {result.targets[-1][0]!r} ({result.images} observation images, {result.predicted} predicted): "
+            "drag its κ sliders", 15000)
 
     def shutdown(self) -> None:
         """The window closes: stop an acquisition (its captures stay in the session), close the rig."""

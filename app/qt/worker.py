@@ -420,12 +420,14 @@ class JobProgress(QWidget):
         The message under the bar (narrow docks) instead of beside it.
     hide_when_idle : bool
         Shown only while a job runs (the status bar).
+    buttons : bool
+        Lay Pause and Cancel out beside the bar (False: the owner places them).
     clock : callable
         For :class:`~app.model.progress.TimeLeft` (tests pass a fake one).
     """
 
     def __init__(self, name: str, *, unit: str = "", stacked: bool = False, hide_when_idle: bool = False,
-                 clock: Callable[[], float] = time.monotonic, parent: QWidget | None = None):
+                 buttons: bool = True, clock: Callable[[], float] = time.monotonic, parent: QWidget | None = None):
         super().__init__(parent)
         self.setObjectName(name)
         self.unit = unit
@@ -441,8 +443,9 @@ class JobProgress(QWidget):
         controls = QHBoxLayout()
         controls.setContentsMargins(0, 0, 0, 0)
         controls.addWidget(self.bar, 1)
-        controls.addWidget(self.pause)
-        controls.addWidget(self.cancel)
+        if buttons:  # else the owner lays :attr:`pause` and :attr:`cancel` out beside its own Start
+            controls.addWidget(self.pause)
+            controls.addWidget(self.cancel)
         lay = QVBoxLayout(self) if stacked else QHBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         if stacked:

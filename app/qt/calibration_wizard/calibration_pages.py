@@ -54,7 +54,7 @@ class CalibrationPage(QWizardPage):
         self.levels.setMaximumWidth(90)
         self.crosstalk = QCheckBox("also measure colour crosstalk (3 more captures)", objectName="wizard_crosstalk")
         self.start = QPushButton("Start", objectName="calibrate_start")
-        self.eta = JobProgress("calibrate_progress", unit="captures")
+        self.eta = JobProgress("calibrate_progress", unit="captures", stacked=True, buttons=False)
         self.pause, self.cancel = self.eta.pause, self.eta.cancel
         self.info = QLabel(objectName="wizard_calibrate_info")
         self.info.setWordWrap(True)
@@ -65,10 +65,12 @@ class CalibrationPage(QWizardPage):
         grid.addWidget(self.levels, 0, 1)
         grid.addWidget(self.crosstalk, 1, 0, 1, 3)
         buttons = QHBoxLayout()
-        buttons.addWidget(self.start)
-        buttons.addWidget(self.eta, 1)
+        for b in (self.start, self.pause, self.cancel):
+            buttons.addWidget(b)
+        buttons.addStretch(1)
         grid.setColumnStretch(2, 1)
         grid.addLayout(buttons, 2, 0, 1, 3)
+        grid.addWidget(self.eta, 3, 0, 1, 3)
         self.run_box = run_box
 
         self.reuse_path = QLineEdit(objectName="wizard_reuse_path")
