@@ -123,6 +123,8 @@ class MainWindow(QMainWindow):
         self.readout.setStyleSheet("font-family: monospace;")
         self.note = QLabel(objectName="view_note")
         self.zoom_label = QLabel(objectName="zoom")
+        self.zoom_label.setMinimumWidth(self.zoom_label.fontMetrics().horizontalAdvance("  1600 %"))
+        self.zoom_label.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
         self.progress = JobProgress("job_progress", hide_when_idle=True)
         self.progress.label.setMinimumWidth(240)
         self.progress.setMaximumWidth(640)

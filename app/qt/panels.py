@@ -295,8 +295,8 @@ class AlbedoPanel(QWidget):
         if lock:
             self.note.setText(lock)
         elif acq is None:
-            self.note.setText("Not acquired yet: κ takes effect in the recolored view after acquisition "
-                              "(the Ground truth view previews it on the virtual rig).")
+            self.note.setText("Not acquired yet: the recolored view multiplies this target's pixels by κ (a naive "
+                              "recolor); acquire it on a rig for its interreflections to follow.")
         elif uid not in acq.cascade:
             self.note.setText("This target was added after the acquisition: acquire again to recolor it.")
         else:
