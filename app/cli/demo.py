@@ -5,7 +5,9 @@ Calibrates the virtual co-axial rig — by default the same one the desktop app'
 be checked exactly; ``--realistic`` adds noise, gamma, black level and an 8-bit projector) —
 captures the right wall's observations, decomposes, recolors it from green to blue
 (κ = (2, 0.125, 8), the paper's Fig. 6) and writes the recolored EXR, a PNG preview, the
-ground-truth PNG and a false-colour error image.
+ground-truth PNG and a false-colour error image. ``--rig mitsuba:cornell`` runs the same on the
+path-traced rig (Mitsuba 3; 64² by default, ``--spp`` samples per pixel per capture, one frame
+per capture).
 
 The headline on stdout compares like with like: the relative error of our recolor and of a
 naive per-pixel recolor over the surfaces (the lamp in view dominates the image's norm and
@@ -36,7 +38,7 @@ from engine.session import Session
 from engine.workflow import (
     edit_from_plan,
     estimated_report,
-    load_decomposition,
+    noise_reduced,
     run_calibration,
     run_capture,
     save_edit,
@@ -52,11 +54,16 @@ def add_arguments(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, default=Path("albedit-demo"),
                         help="output folder (default %(default)s)")
     parser.add_argument("--scene", default="cornell", help="virtual scene (default %(default)s)")
+    parser.add_argument("--rig", default=None, metavar="NAME",
+                        help="rig with ground truth to run on instead: virtual:SCENE or mitsuba:SCENE (path-traced)")
+    parser.add_argument("--spp", type=int, default=256,
+                        help="mitsuba rig: samples per pixel of each capture's render (default %(default)s)")
     parser.add_argument("--target", default=DEMO_TARGET, help="scene target to recolor (default %(default)s)")
     parser.add_argument("--kappa", type=kappa, default=np.array(DEMO_KAPPA), metavar="R,G,B",
                         help="albedo scale (default 2,0.125,8: the paper's Fig. 6)")
     parser.add_argument("--order", type=order, default=DEMO_ORDER, help="decomposition order K (default %(default)s)")
-    parser.add_argument("--resolution", type=resolution, default=(128, 128), help="camera resolution (default 128)")
+    parser.add_argument("--resolution", type=resolution, default=None,
+                        help="camera resolution (default 128, 64 on the mitsuba rig)")
     rig = parser.add_mutually_exclusive_group()
     rig.add_argument("--ideal", dest="ideal", action="store_true", default=DEMO_OPTIONS["ideal"],
                      help="the ideal rig: no noise, linear projector (the default, as in the desktop app's demo)")
@@ -68,7 +75,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute")
     parser.add_argument("--frames", type=frames, default=None,
                         help="frames averaged per capture (default 1 on the ideal rig, 16 on the realistic one: "
-                             "κ = 8 amplifies noise 8^i at order i)")
+                             "κ = 8 amplifies noise 8^i at order i; 1 on the mitsuba rig: each frame is a render)")
     parser.add_argument("--denoise", type=_denoise, default="auto", metavar="auto|RADIUS",
                         help="noise reduction: 'auto' (default) sizes the guided filter from the measured noise and "
                              "skips it on noise-free data; a radius in pixels; 0 = off")
@@ -93,12 +100,22 @@ def run(args) -> int:
     if args.fresh and session_path.exists():
         shutil.rmtree(session_path)
     out.mkdir(parents=True, exist_ok=True)
-    frames = args.frames if args.frames is not None else (1 if args.ideal else 16)
+    name = args.rig or f"virtual:{args.scene}"
+    backend, _, scene = name.partition(":")
+    if backend not in ("virtual", "mitsuba"):
+        raise InputError(f"--rig must be a rig with ground truth, virtual:SCENE or mitsuba:SCENE, got {name!r}")
+    path_traced = backend == "mitsuba"
+    frames = args.frames if args.frames is not None else (1 if args.ideal or path_traced else 16)
+    options = dict(ideal=args.ideal, resolution=args.resolution or ((64, 64) if path_traced else (128, 128)),
+                   seed=DEMO_OPTIONS["seed"], projector=args.projector)
+    if path_traced:
+        if args.spp < 1:
+            raise InputError(f"--spp must be >= 1, got {args.spp}")
+        options.update(spp=args.spp, progress=ProgressBar())
     t0 = time.monotonic()
-    with devices.open_rig(f"virtual:{args.scene}", ideal=args.ideal, resolution=args.resolution,
-                          seed=DEMO_OPTIONS["seed"], projector=args.projector) as rig:
+    with devices.open_rig(name, **options) as rig:
         if args.target not in rig.targets:
-            raise InputError(f"scene {args.scene!r} has no target {args.target!r}; it has {sorted(rig.targets)}")
+            raise InputError(f"scene {scene!r} has no target {args.target!r}; it has {sorted(rig.targets)}")
         mask = rig.targets[args.target]
         if (session_path / "manifest.json").exists():
             session = Session.open(session_path)
@@ -108,7 +125,7 @@ def run(args) -> int:
                 session_path, rig_name=rig.identity, camera_resolution=tuple(rig.camera.resolution),
                 projector_resolution=tuple(rig.projector.resolution), metadata={"demo": True},
             )
-        kind = "ideal" if args.ideal else "realistic"
+        kind = ("ideal" if args.ideal else "realistic") + (" path-traced" if path_traced else "")
         print(f"calibrating {rig.name} ({kind}, {args.projector}) ...", file=sys.stderr)
         run_calibration(rig, session, progress=ProgressBar())
         print(f"capturing target {args.target!r} at order {args.order}, {frames} frame(s) per capture ...",
@@ -128,7 +145,7 @@ def run(args) -> int:
     if args.denoise != "auto":
         size = int(args.denoise)
     if size > 0:
-        d = load_decomposition(session, result.key, denoise=size)
+        d = noise_reduced(session, result.key, d, size)
     ours = recolor(d, args.kappa)
     naive = np.where(mask[:, :, None], photo * args.kappa.astype(np.float32), photo)
     err = {name: (relative_error(img, truth, surfaces), relative_error(img, truth))

@@ -42,6 +42,20 @@ from engine.workflow import (
 PHOTOGRAPH = "photograph"
 UNREACHABLE = "unreachable"
 
+class NeedsClipping(InputError):
+    """An integer export would have to clip values outside [0, 1]; exporting again with ``clip=True`` allows it.
+
+    Attributes
+    ----------
+    values : int
+        How many values fall outside [0, 1].
+    """
+
+    def __init__(self, message: str, *, values: int) -> None:
+        super().__init__(message)
+        self.values = values
+
+
 #: Export choices: extension → allowed dtypes (first is the default).
 EXPORT_FORMATS = {
     ".exr": ("half", "float"),
@@ -49,10 +63,6 @@ EXPORT_FORMATS = {
     ".tiff": ("uint16", "float"),
     ".png": ("uint8",),
 }
-
-
-class ExportNeedsClipping(InputError):
-    """An integer export would clip values: :func:`export_image` with ``clip=True`` clips and counts them."""
 
 
 # ----------------------------------------------------------------------------- opening
@@ -298,9 +308,9 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
     Raises
     ------
     InputError
-        Nothing acquired, unsupported format/dtype.
-    ExportNeedsClipping
-        Values out of range for a uint16 TIFF without ``clip`` (an :class:`InputError` too).
+        Nothing acquired, unsupported format or dtype.
+    NeedsClipping
+        Values out of range for uint16 without ``clip`` (an :class:`InputError` too).
     Cancelled
         Stopped before the write started (nothing written).
     """
@@ -327,10 +337,9 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
         pixels = image * np.float32(2.0**exposure)
         over = int(np.count_nonzero((pixels > 1.0) | (pixels < 0.0)))
         if over and not clip:
-            raise ExportNeedsClipping(
+            raise NeedsClipping(
                 f"{over} values fall outside [0, 1] after an exposure of {exposure:+g} stops and a 16-bit TIFF "
-                "cannot hold them: lower the exposure, export float, or allow clipping"
-            )
+                "cannot hold them: lower the exposure, export float, or allow clipping", values=over)
         pixels = np.clip(pixels, 0.0, 1.0)
         meta[METADATA_KEY]["linear"] = {"exposure": float(exposure), "clipped_values": over}
     else:

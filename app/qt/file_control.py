@@ -133,7 +133,7 @@ class FileControl(QObject):
         exposure = self.w.exposure_spin.value()
 
         def failed(exc):
-            if isinstance(exc, files.ExportNeedsClipping) and not clip:
+            if isinstance(exc, files.NeedsClipping) and not clip:
                 answer = QMessageBox.question(self.w, "Export", f"{exc}\n\nClip those values to 1 and export anyway?")
                 if answer == QMessageBox.StandardButton.Yes:
                     QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True))

@@ -29,7 +29,7 @@ def _open_rig(name: str, options: dict, *, progress=None, should_stop=None):
     """Job body: open a rig (virtual set-ups report their build progress)."""
     import devices
 
-    if name.startswith("virtual:"):
+    if name.startswith(("virtual:", "mitsuba:")):  # simulated rigs report their set-up progress
         options = dict(options, progress=progress)
     return devices.open_rig(name, **options)
 

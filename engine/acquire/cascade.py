@@ -248,11 +248,13 @@ def acquire_cascade(
             f"fixed_kappa must give the κ of every target but the last ({len(targets) - 1}), got {len(fixed_kappa)}"
         )
     kappas = [check_kappa(kap, 3, name=f"fixed_kappa[{i}]") for i, kap in enumerate(fixed_kappa)]
-    total = np.zeros(calibration.camera_resolution, int)
-    for _, m in targets:
-        total += m.astype(bool)
-    if (total > 1).any():
-        raise InputError("targets overlap: a pixel may belong to one target only")
+    total = np.zeros(calibration.camera_resolution, np.float64)
+    for _, m in targets:  # hard masks count 1 per pixel; soft masks their coverage
+        m = np.asarray(m)
+        total += m if m.dtype.kind == "f" else m.astype(bool)
+    if (total > 1 + 1e-6).any():
+        raise InputError("targets overlap: a pixel may belong to one target only "
+                         "(soft masks: coverages may not sum past 1)")
     rig = recorder.rig
     identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))

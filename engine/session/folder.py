@@ -169,7 +169,10 @@ class Session:
 
     @classmethod
     def open(cls, path, *, verify: bool = False) -> Session:
-        """Open an existing session, checking it without changing anything on disk.
+        """Open an existing session, checking it; only temporary files of killed writes are removed.
+
+        Those are removed only when no one writes the session (see :attr:`removed`); a
+        refusal changes nothing on disk.
 
         Parameters
         ----------

@@ -45,6 +45,7 @@ from engine.workflow.decomposition import (
     decomposition_key,
     denoised_key,
     load_decomposition,
+    noise_reduced,
     photograph_name,
 )
 from engine.workflow.edit import edit_from_plan, save_edit, saved_edit
@@ -53,6 +54,6 @@ __all__ = [
     "MAX_FRAMES", "CaptureResult", "Preflight", "Unreachable", "adopt_calibration", "cached_decomposition",
     "calibration_problems", "capture_plan", "check_frames", "check_rig", "check_targets", "decomposition_key",
     "denoised_key", "edit_from_plan", "estimated_report", "load_calibration", "load_compatible_calibration",
-    "load_decomposition", "open_session_for_rig", "photograph_name", "preflight", "run_calibration", "run_capture",
-    "save_calibration", "save_edit", "saved_edit",
+    "load_decomposition", "noise_reduced", "open_session_for_rig", "photograph_name", "preflight",
+    "run_calibration", "run_capture", "save_calibration", "save_edit", "saved_edit",
 ]

@@ -22,7 +22,7 @@ from engine.workflow.calibration import load_calibration
 
 __all__ = [
     "DECOMPOSITION_VERSION", "cached_decomposition", "decomposition_key", "denoised_key", "load_decomposition",
-    "photograph_name",
+    "noise_reduced", "photograph_name",
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
@@ -85,11 +85,21 @@ def load_decomposition(session: Session, key: str | None = None, *, rig=None, de
         _cache_best_effort(session, key, d)
     if denoise <= 0:
         return d
-    filtered = cached_decomposition(session, denoised_key(key, denoise), notes)
-    if filtered is None:
-        photo = session.read_capture(photograph or photograph_name(session))
-        filtered = denoise_components(d, photo, radius=denoise)
-        _cache_best_effort(session, denoised_key(key, denoise), filtered)
+    return cached_decomposition(session, denoised_key(key, denoise), notes) or noise_reduced(
+        session, key, d, denoise, photograph=photograph)
+
+
+def noise_reduced(session: Session, key: str, decomposition: Decomposition, radius: int, *,
+                  photograph: str | None = None) -> Decomposition:
+    """``decomposition`` (cached under ``key``) noise-reduced with ``radius``, and cached under its own key.
+
+    Guided by the session's photograph (:func:`photograph_name`, or the capture ``photograph``);
+    see :func:`engine.denoise.denoise_components`. A session that cannot be written (read-only,
+    locked by another writer) still gets the result, uncached.
+    """
+    photo = session.read_capture(photograph or photograph_name(session))
+    filtered = denoise_components(decomposition, photo, radius=radius)
+    _cache_best_effort(session, denoised_key(key, radius), filtered)
     return filtered
 
 

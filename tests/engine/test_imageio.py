@@ -332,7 +332,6 @@ class RawStandIn:
     _calls: list = []
     raw_type = rawpy.RawType.Flat
     raw_image_visible = np.full((2, 3), 4095, np.uint16)
-    raw_type = rawpy.RawType.Flat  # a Bayer mosaic (a linear DNG is RawType.Stack)
     white_level = 4095
     black_level_per_channel = [64, 64, 64, 64]
 

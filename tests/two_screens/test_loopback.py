@@ -97,7 +97,10 @@ def test_calibration_matches_the_virtual_rig(runs):
     off = np.maximum(np.abs(a.x[near] - xy[near][:, 0]), np.abs(a.y[near] - xy[near][:, 1]))
     assert (off <= 1).mean() > 0.95  # edge pixels straddle two surfaces
     surfaces = runs["surfaces"]  # the virtual rig brackets the lamp, a hot-folder camera cannot
-    np.testing.assert_allclose(ours.black_frame[surfaces], theirs.black_frame[surfaces], atol=2e-3)
+    # the same light, independent noise: the virtual rig seeds each frame from its capture's identity,
+    # which the bench camera behind a hot folder cannot know
+    difference = ours.black_frame[surfaces] - theirs.black_frame[surfaces]
+    assert abs(float(difference.mean())) < 5e-4 and float(np.abs(difference).max()) < 5e-2
 
 
 def test_recolouring_matches_the_virtual_rig_within_the_noise(runs):

@@ -44,7 +44,7 @@ from app.qt.calibration_wizard.calibration_pages import (
     ResultsPage,
     SummaryPage,
 )
-from app.qt.calibration_wizard.common import NO_SCREEN_BACKENDS, EnterCommits, error_text, esc, fix_for, red
+from app.qt.calibration_wizard.common import NO_SCREEN_BACKENDS, SIMULATED, EnterCommits, error_text, esc, fix_for, red
 from app.qt.calibration_wizard.exposure_page import ExposurePage
 from app.qt.calibration_wizard.setup_pages import ProjectorPage, RigPage
 from app.qt.layout import fit_to_screen
@@ -67,9 +67,9 @@ SETTINGS = "wizard"
 
 
 def _open_rig(name: str, options: dict, *, progress=None, should_stop=None):
-    """Open a rig on a worker (virtual set-ups report their build progress)."""
+    """Open a rig on a worker (simulated rigs report their set-up progress)."""
     checkpoint(should_stop, "opening the rig")
-    if name.startswith("virtual:"):
+    if name.startswith(SIMULATED):
         options = dict(options, progress=progress)
     return devices.open_rig(name, **options)
 
@@ -238,7 +238,7 @@ class CalibrationWizard(QWizard):
     def _spec(self) -> tuple:
         name = self.rig_page.rig_name.text().strip()
         options = dict(self.rig_page.options(), **self.projector_page.options())
-        if name.startswith("virtual:"):
+        if name.startswith(SIMULATED):
             options.update(self.rig_options)
         return name, options
 

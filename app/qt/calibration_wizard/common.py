@@ -11,7 +11,9 @@ from engine.errors import DeviceError, InputError, SessionError
 
 RED = "#c0392b"
 #: Backends whose projector is simulated or recorded: no screen to choose, opened on a worker.
-NO_SCREEN_BACKENDS = ("virtual", "replay")
+NO_SCREEN_BACKENDS = ("virtual", "mitsuba", "replay")
+#: Rigs that simulate their scene: they take the "Virtual rig" options and report set-up progress.
+SIMULATED = ("virtual:", "mitsuba:")
 
 
 def esc(text: str) -> str:

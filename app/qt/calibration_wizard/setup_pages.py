@@ -21,7 +21,7 @@ from PySide6.QtWidgets import (
 )
 
 import devices
-from app.qt.calibration_wizard.common import NO_SCREEN_BACKENDS, error_text, esc, red
+from app.qt.calibration_wizard.common import NO_SCREEN_BACKENDS, SIMULATED, error_text, esc, red
 from app.qt.worker import JobProgress
 
 
@@ -136,7 +136,7 @@ class RigPage(QWizardPage):
             self.rig_name.setText(item.data(Qt.ItemDataRole.UserRole))
 
     def _on_name_changed(self, text: str) -> None:
-        self.virtual.setEnabled(text.startswith("virtual:"))
+        self.virtual.setEnabled(text.startswith(SIMULATED))
         self.completeChanged.emit()
 
     def _on_browse(self) -> None:
@@ -153,8 +153,8 @@ class RigPage(QWizardPage):
         return bool(name) and ":" in name and bool(self.session_path.text().strip())
 
     def options(self) -> dict:
-        """Options for :func:`devices.open_rig` from this page (virtual rigs only)."""
-        if not self.rig_name.text().startswith("virtual:"):
+        """Options for :func:`devices.open_rig` from this page (simulated rigs only)."""
+        if not self.rig_name.text().startswith(SIMULATED):
             return {}
         return {"ideal": self.ideal.isChecked(), "projector": self.pose.currentText(),
                 "resolution": (self.res_h.value(), self.res_w.value())}
@@ -191,10 +191,10 @@ class ProjectorPage(QWizardPage):
             self.note.setText("The rig is already open; its projector is set.")
             self.screens.hide()
         elif backend in NO_SCREEN_BACKENDS:
-            self.note.setText(
-                "The virtual rig simulates its projector (its pose is chosen on the first page): there is no "
-                "screen to choose." if backend == "virtual" else
-                "A replay rig serves recorded captures back: it has no projector screen.")
+            simulated = f"The {'virtual' if backend == 'virtual' else 'path-traced'} rig simulates its projector " \
+                "(its pose is chosen on the first page): there is no screen to choose."
+            self.note.setText(simulated if backend != "replay" else
+                              "A replay rig serves recorded captures back: it has no projector screen.")
             self.screens.hide()
         else:
             self.screens.show()

@@ -89,6 +89,20 @@ def test_rig_page_greys_out_unavailable_rigs_with_their_reason(make_wizard, monk
     assert "unknown rig backend 'nosuch'" in w.projector_page.status.text()
 
 
+def test_wizard_opens_the_path_traced_rig_like_the_virtual_one(make_wizard, qtbot, tmp_path):
+    pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+    w = make_wizard(rig_name="mitsuba:cornell",
+                    rig_options={"cache_dir": str(tmp_path / "mi"), "spp": 4, "ambient_spp": 8, "coverage_passes": 4})
+    assert w.rig_page.virtual.isEnabled()
+    assert w.rig_page.options() == {"ideal": True, "projector": "coaxial", "resolution": (RES, RES)}
+    w.next()
+    assert w.currentId() == w.PAGE_PROJECTOR and w.projector_page.screens.isHidden()
+    w.next()  # opens the rig on a worker: loading Mitsuba and rendering take longer than the virtual rig
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=4 * TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.exposure_page.live.frames >= 1, timeout=4 * TIMEOUT_MS)
+    assert w.rig.name == "mitsuba:cornell" and w.rig.camera.resolution == (RES, RES)
+
+
 def test_wizard_calibrates_into_a_session_on_workers(make_wizard, qtbot, tmp_path):
     w = make_wizard()
     w.next()

@@ -69,6 +69,6 @@ def test_an_export_that_needs_clipping_says_so_by_its_type(acquired_doc, tmp_pat
     from app.model import files
 
     acquired_doc.set_kappa(acquired_doc.by_name("wall").uid, 16.0)
-    with pytest.raises(files.ExportNeedsClipping, match="allow clipping"):
+    with pytest.raises(files.NeedsClipping, match="allow clipping"):
         files.export_image(acquired_doc, tmp_path / "x.tif", dtype="uint16", exposure=8.0)
     assert files.export_image(acquired_doc, tmp_path / "x.tif", dtype="uint16", exposure=8.0, clip=True).exists()
