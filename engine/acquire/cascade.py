@@ -29,6 +29,8 @@ from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
 from engine.recolor import recolor
+from engine.session.edit import mask_digest, mask_name
+from engine.session.paths import NAME
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,6 +167,21 @@ class _Plan:
         return recolor(self.prepared[t].decompose(obs), self.kappas[t])
 
 
+def capture_stem(target: str, mask) -> str:
+    """The part of a target's capture names that names the target.
+
+    The display name itself when it is a safe file name; otherwise (spaces, punctuation, any
+    text a user may type) the session's rule for mask files, :func:`engine.session.edit.mask_name`.
+
+    Examples
+    --------
+    >>> m = np.eye(3, dtype=bool)
+    >>> capture_stem("right_wall", m), capture_stem("target 1", m)
+    ('right_wall', 'target_1-7ea71875')
+    """
+    return target if NAME.fullmatch(target) and len(target) <= 64 else mask_name(target, mask_digest(mask))
+
+
 def acquire_cascade(
     recorder: Recorder,
     calibration: Calibration,
@@ -252,7 +269,7 @@ def acquire_cascade(
     base = photograph if photograph_pattern is None else recorder.capture(f"{prefix}-black", recorder.black(), meta={"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{n}")
+            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{capture_stem(n, m)}")
             for n, m in targets
         ]
     plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)
