@@ -73,7 +73,8 @@ def _gphoto2():
     except ModuleNotFoundError as exc:
         if exc.name != "gphoto2":
             raise DeviceError(f"python-gphoto2 cannot be imported: {exc}") from None
-        raise DeviceError("python-gphoto2 is not installed; install the optional extra: pip install 'albedit[gphoto2]'") from None
+        raise DeviceError("python-gphoto2 is not installed; "
+                          "install the optional extra: pip install 'albedit[gphoto2]'") from None
     except ImportError as exc:  # installed, but libgphoto2 does not load
         raise DeviceError(f"python-gphoto2 cannot be imported: {exc}") from None
     return gphoto2
@@ -228,7 +229,8 @@ class GPhoto2Camera:
                 current = self._config("exposure").get_value()
                 seconds = parse_shutter(current)
                 if seconds is None:
-                    raise DeviceError(f"the camera's shutter speed is {current!r}; pass exposure= (seconds) to set a fixed one")
+                    raise DeviceError(f"the camera's shutter speed is {current!r}; "
+                                      "pass exposure= (seconds) to set a fixed one")
                 self._exposure, self.settings["exposure"] = seconds, str(current)
             self._gain = self._read_gain(base_iso)
         except BaseException:
@@ -295,7 +297,9 @@ class GPhoto2Camera:
             alt = text.lower().removeprefix("f/")
             text = low.get(text.lower()) or low.get(alt) or low.get(f"f/{alt}") or ""
             if not text and key == "image_format" and str(value).upper() == "RAW":
-                raws = [c for c in choices if c.upper().startswith(("RAW", "NEF", "CR2", "CR3", "ARW", "RAF", "ORF", "RW2", "DNG")) and "+" not in c and "JPEG" not in c.upper()]
+                raw_names = ("RAW", "NEF", "CR2", "CR3", "ARW", "RAF", "ORF", "RW2", "DNG")
+                raws = [c for c in choices
+                        if c.upper().startswith(raw_names) and "+" not in c and "JPEG" not in c.upper()]
                 text = raws[0] if raws else ""
             if not text:
                 raise InputError(f"{key} {value!r} is not offered by this camera; valid choices: {', '.join(choices)}")
@@ -327,7 +331,8 @@ class GPhoto2Camera:
         current = str(widget.get_value())
         self.settings["iso"] = current
         if not current.replace(".", "", 1).isdigit():
-            raise DeviceError(f"ISO is {current!r}; pass iso= with a fixed value (choices: {', '.join(self._choices(widget))})")
+            raise DeviceError(f"ISO is {current!r}; pass iso= with a fixed value "
+                              f"(choices: {', '.join(self._choices(widget))})")
         return float(current) / base
 
     # -- exposure and gain ----------------------------------------------------------------
@@ -395,7 +400,8 @@ class GPhoto2Camera:
         if not self._lock.acquire(blocking=False):
             return  # a capture is running; it schedules the next release itself
         try:
-            if not self.closed and self._session_open and time.monotonic() - self._last_use >= self.release_after * 0.99:
+            idle = time.monotonic() - self._last_use
+            if not self.closed and self._session_open and idle >= self.release_after * 0.99:
                 self._drop_session()
         finally:
             self._lock.release()
@@ -417,7 +423,8 @@ class GPhoto2Camera:
         gp = self._gp
         try:
             self._ensure_session()
-            path = self._call(self._cam.capture, gp.GP_CAPTURE_IMAGE, what="capturing", timeout=self.timeout + self._exposure)
+            path = self._call(self._cam.capture, gp.GP_CAPTURE_IMAGE, what="capturing",
+                              timeout=self.timeout + self._exposure)
             folder, name = str(path.folder), str(path.name)
             try:
                 cfile = self._call(self._cam.file_get, folder, name, gp.GP_FILE_TYPE_NORMAL, what=f"downloading {name}")
@@ -433,7 +440,8 @@ class GPhoto2Camera:
                 self._drop_session()  # unplugged, timed out, claimed: start afresh next time
             raise
         if PurePosixPath(name).suffix.lower() not in RAW_EXTENSIONS:
-            raise DeviceError(f"the camera delivered {name!r}, not a RAW file; set image_format='RAW' (RAW only, not RAW+JPEG)")
+            raise DeviceError(f"the camera delivered {name!r}, not a RAW file; "
+                              "set image_format='RAW' (RAW only, not RAW+JPEG)")
         return name, data
 
     def _decode(self, name: str, data: bytes):
@@ -445,7 +453,8 @@ class GPhoto2Camera:
         if self.resolution is None:
             self.resolution = (h, w)
         elif (h, w) != tuple(self.resolution):
-            raise DeviceError(f"{name} is {w}x{h} pixels; the camera's images were {self.resolution[1]}x{self.resolution[0]}")
+            raise DeviceError(f"{name} is {w}x{h} pixels; "
+                              f"the camera's images were {self.resolution[1]}x{self.resolution[0]}")
         return raw
 
     def capture(self) -> Frame:
@@ -482,7 +491,8 @@ class GPhoto2Camera:
             "settings": dict(self.settings),
         }
         image = raw.image / np.float32(self._exposure * self._gain)
-        return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=raw.black_level, saturated=raw.saturated, metadata=meta)
+        return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=raw.black_level,
+                     saturated=raw.saturated, metadata=meta)
 
     def close(self) -> None:
         """Release the camera (``exit``). Idempotent; errors while releasing are ignored."""
@@ -515,5 +525,6 @@ def probe(*, gp=None) -> list[Availability]:
     except DeviceError as exc:
         return [Availability("gphoto2:", False, str(exc))]
     if not cameras:
-        return [Availability("gphoto2:", False, "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
+        return [Availability("gphoto2:", False,
+                             "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
     return [Availability(f"gphoto2:{port}", True, model) for model, port in cameras]

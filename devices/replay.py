@@ -138,7 +138,8 @@ class ReplayCamera:
         """
         pattern_id = self._projector.pattern_id
         if pattern_id is None:
-            raise DeviceError("replay camera: nothing has been shown on the projector yet, so there is nothing to replay")
+            raise DeviceError("replay camera: nothing has been shown on the projector yet, "
+                              "so there is nothing to replay")
         records = self._candidates(pattern_id)
         slot = (pattern_id, self._exposure if self._exposure_set else None)
         n = self._served.get(slot, 0)

@@ -682,7 +682,8 @@ def _decode_linear(raw) -> RawDecode:
     image = (values - black) / (np.float32(white) - black)
     np.maximum(image, 0.0, out=image)  # as LibRaw clips noise below black for mosaics
     saturated = np.any(values >= white, axis=2)
-    return RawDecode(image=np.ascontiguousarray(image), saturated=saturated, black_level=float(black.mean()), white_level=white)
+    return RawDecode(image=np.ascontiguousarray(image), saturated=saturated, black_level=float(black.mean()),
+                     white_level=white)
 
 
 def read_raw_bytes(data: bytes, *, name: str = "<RAW bytes>") -> np.ndarray:
@@ -777,7 +778,8 @@ def _metadata_texts(path: Path, metadata: dict | None) -> dict[str, str]:
     texts = {}
     for key, value in metadata.items():
         if not isinstance(key, str) or not key or not all(c.isalnum() or c in "_.-" for c in key):
-            raise InputError(f"{path}: metadata key {key!r} must be a non-empty string of letters, digits, '_', '.', '-'")
+            raise InputError(f"{path}: metadata key {key!r} must be a non-empty string of letters, digits, "
+                             "'_', '.', '-'")
         try:
             texts[key] = json.dumps(value, ensure_ascii=False, allow_nan=False)
         except (TypeError, ValueError) as exc:
@@ -877,7 +879,8 @@ def write_image(
     if integer_input:
         if str(array.dtype) != dtype:
             raise InputError(
-                f"{path}: a {array.dtype} image is written verbatim and needs dtype={str(array.dtype)!r}, got {dtype!r}; "
+                f"{path}: a {array.dtype} image is written verbatim and needs dtype={str(array.dtype)!r}, "
+                f"got {dtype!r}; "
                 "pass a float image to convert"
             )
         pixels = np.ascontiguousarray(array)
@@ -887,7 +890,8 @@ def write_image(
             raise InputError(f"{path}: image contains {bad} non-finite values (NaN or inf); refusing to write")
         pixels = np.ascontiguousarray(array, dtype=np.float32)
         if dtype == "half" and np.abs(pixels).max() > 65504.0:
-            raise InputError(f"{path}: values up to {np.abs(pixels).max():g} overflow half floats (max 65504); use dtype='float'")
+            raise InputError(f"{path}: values up to {np.abs(pixels).max():g} overflow half floats (max 65504); "
+                             "use dtype='float'")
         if dtype in ("uint8", "uint16"):
             lo, hi = float(pixels.min()), float(pixels.max())
             if lo < 0.0 or hi > 1.0:

@@ -225,7 +225,8 @@ def load_scene(name_or_path: str | Path) -> Scene:
     else:
         path = SCENE_DIR / f"{text}.json"
         if not path.is_file():
-            raise InputError(f"unknown virtual scene {text!r}; expected one of {scene_names()} or a path to a .json file")
+            raise InputError(f"unknown virtual scene {text!r}; "
+                             f"expected one of {scene_names()} or a path to a .json file")
     try:
         if not path.exists():
             raise InputError(f"cannot read scene file {str(path)!r}: there is no such file")
@@ -317,7 +318,8 @@ def parse_scene(data: dict, *, default_name: str = "scene", base_dir: Path | Non
 
     targets_in = data["targets"]
     if not isinstance(targets_in, dict):
-        raise InputError(f"targets must be an object mapping target names to lists of surfaces, got {type(targets_in).__name__}")
+        raise InputError("targets must be an object mapping target names to lists of surfaces, "
+                         f"got {type(targets_in).__name__}")
     targets = {}
     for tname, pieces in targets_in.items():
         where = f"targets[{tname!r}]"

@@ -319,7 +319,8 @@ def patch_to_patch(scene: Scene, setup: Setup, *, per_edge: int = 4) -> np.ndarr
         qs.append(np.full(a.size, q))
         aa.append(a.ravel())
         bb.append(b.ravel())
-        pp.append((offset[q] + (np.arange(gu) // per_edge)[:, None] * nv[q] + (np.arange(gv) // per_edge)[None, :]).ravel())
+        patch_u, patch_v = np.arange(gu) // per_edge, np.arange(gv) // per_edge
+        pp.append((offset[q] + patch_u[:, None] * nv[q] + patch_v[None, :]).ravel())
     qs, aa, bb, pp = map(np.concatenate, (qs, aa, bb, pp))
     node_offset = np.concatenate([[0], np.cumsum((nu + 1) * (nv + 1))])
     w = _interpolation(aa, bb, qs, np.ones(len(qs), bool), nu, nv, node_offset, setup.gn.shape[0])
@@ -531,7 +532,8 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
 
     report(progress, steps, steps, "set-up done")
     return Setup(quad=quad, a=a, b=b, points=points, area=area, patch=patch,
-                 patch_quad=patch_quad, patch_area=patch_area, patch_nu=nu, patch_nv=nv, mavg=mavg, interp=interp, gn=gn,
+                 patch_quad=patch_quad, patch_area=patch_area, patch_nu=nu, patch_nv=nv, mavg=mavg, interp=interp,
+                 gn=gn,
                  light_quads=light_quads, light_ff=light_ff, proj_index=proj_index, proj_lit=lit,
                  proj_factor=proj_factor, proj_xy=proj_xy, pixel_quad=pixel_quad,
                  resolution=np.array(geometry.resolution), projector_resolution=np.array(geometry.projector_resolution),
@@ -567,7 +569,8 @@ def _mixed_pixels(scene: Scene, camera: View, projector: View, pixel_quad, a, b,
     return np.flatnonzero(out.ravel())
 
 
-def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray, normal: np.ndarray) -> np.ndarray:
+def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray,
+             normal: np.ndarray) -> np.ndarray:
     """Whether each point (on ``quad``) is what its nearest pixel of ``view`` sees.
 
     A pixel's ray and a point projecting into that pixel meet the same plane within the
