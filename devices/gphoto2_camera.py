@@ -27,6 +27,7 @@ import math
 import threading
 import time
 from pathlib import PurePosixPath
+from typing import Any
 
 import numpy as np
 
@@ -80,7 +81,13 @@ def _gphoto2():
     return gphoto2
 
 
-def device_error(exc: BaseException, what: str) -> DeviceError:
+class GPhoto2DeviceError(DeviceError):
+    """A :class:`DeviceError` from libgphoto2 that keeps its error code (the reconnect rule reads it)."""
+
+    gphoto2_code: int | None = None
+
+
+def device_error(exc: BaseException, what: str) -> GPhoto2DeviceError:
     """Turn a ``gphoto2.GPhoto2Error`` into a DeviceError in plain words.
 
     Examples
@@ -91,8 +98,9 @@ def device_error(exc: BaseException, what: str) -> DeviceError:
     'opening the camera failed: the camera is claimed by another '
     """
     code = getattr(exc, "code", None)
-    words = ERROR_WORDS.get(code, f"libgphoto2 error {code}: {exc}")
-    err = DeviceError(f"{what} failed: {words}")
+    unknown = f"libgphoto2 error {code}: {exc}"
+    words = unknown if code is None else ERROR_WORDS.get(code, unknown)
+    err = GPhoto2DeviceError(f"{what} failed: {words}")
     err.gphoto2_code = code
     return err
 
@@ -210,7 +218,7 @@ class GPhoto2Camera:
         #: what a calibration depends on (engine.rig.RigLike.fingerprint): the body it was opened as
         self.fingerprint = {"camera": self.name or "the first camera found"}
         self._dog = Watchdog(f"camera {camera}" if camera else "camera")
-        self._cam = None
+        self._cam: Any = None  # a gphoto2.Camera once open (the library is untyped)
         self._cam = self._open(camera)
         self._session_open = True
         try:
@@ -314,8 +322,8 @@ class GPhoto2Camera:
         self._set_choice(key, value, widget)
 
     def _shutter_choices(self) -> list[tuple[float, str]]:
-        pairs = [(parse_shutter(c), c) for c in self._choices(self._config("exposure"))]
-        pairs = sorted((s, c) for s, c in pairs if s is not None)
+        parsed = [(parse_shutter(c), c) for c in self._choices(self._config("exposure"))]
+        pairs = sorted((s, c) for s, c in parsed if s is not None)
         if not pairs:
             raise DeviceError("the camera offers no fixed shutter speeds (set the mode dial to M)")
         return pairs
@@ -401,7 +409,8 @@ class GPhoto2Camera:
             return  # a capture is running; it schedules the next release itself
         try:
             idle = time.monotonic() - self._last_use
-            if not self.closed and self._session_open and idle >= self.release_after * 0.99:
+            after = self.release_after  # not None: the release timer runs only with one
+            if not self.closed and self._session_open and after is not None and idle >= after * 0.99:
                 self._drop_session()
         finally:
             self._lock.release()

@@ -27,6 +27,7 @@ import re
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -181,7 +182,7 @@ class HarvestersCamera:
         self.closed = False
         self._lock = threading.Lock()
         self._dog = Watchdog("GenICam camera")
-        self._ia = None
+        self._ia: Any = None  # harvesters' ImageAcquirer once the camera is open (the library is untyped)
         self._h = _new_harvester()
         try:
             self._call(self._h.add_file, str(cti_path), True, True, what="loading the GenTL producer")

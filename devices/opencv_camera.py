@@ -172,6 +172,7 @@ class OpenCVCamera:
         self.resolution: tuple[int, int] = first.shape[:2]
         self.dtype = first.dtype
         levels = int(np.iinfo(first.dtype).max) + 1
+        self._response_note: str | None  # what the metadata calls the response when it was assumed
         if response is None:
             response = "srgb" if first.dtype == np.uint8 else "linear"
             self.warnings.append(f"response not given: assuming {response}; measure it with calibrate_response()")

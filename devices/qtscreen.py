@@ -47,7 +47,9 @@ __all__ = [
 class ScreenInfo(NamedTuple):
     """One screen as Qt sees it; ``width``/``height`` in device pixels (what a projector shows)."""
 
-    index: int
+    # mypy reads a field named "index" as an incompatible override of the tuple method index();
+    # that method is not used on a ScreenInfo, and the field name is public API
+    index: int  # type: ignore[assignment]
     name: str
     width: int
     height: int
@@ -569,7 +571,7 @@ class QtScreenProjector:
         self.closed = True
         self.window.closing = True
         app = QCoreApplication.instance()
-        if app is not None:
+        if isinstance(app, QGuiApplication):  # the projector was opened with one (_application)
             try:
                 app.screenRemoved.disconnect(self._on_screen_removed)
             except (RuntimeError, TypeError):

@@ -44,7 +44,8 @@ class ReplayProjector:
     """
 
     def __init__(self, resolution: tuple[int, int], bit_depth: int = 8):
-        self.resolution = tuple(resolution)
+        h, w = resolution
+        self.resolution = (h, w)
         self.bit_depth = int(bit_depth)
         self.pattern_id: str | None = None
 

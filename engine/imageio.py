@@ -521,7 +521,7 @@ def read_mask(path) -> np.ndarray:
     if alpha is not None and (pixels[..., alpha] < 1).any():
         return pixels[..., alpha] > 0
     colour = [c for c in range(pixels.shape[2]) if c != alpha]
-    return (pixels[..., colour] > 0).any(axis=2)
+    return np.any(pixels[..., colour] > 0, axis=2)
 
 
 def _alpha_index(path: Path, channels: int) -> int | None:
@@ -635,6 +635,7 @@ def decode_raw(source, *, name: str | None = None) -> RawDecode:
     ...     print(str(exc).split(" (")[0])
     DSC_0001.NEF: cannot decode RAW data
     """
+    data: io.BytesIO | str
     if isinstance(source, (bytes, bytearray, memoryview)):
         label = name or "<RAW bytes>"
         if len(source) == 0:
@@ -662,7 +663,7 @@ def decode_raw(source, *, name: str | None = None) -> RawDecode:
     if mosaic.shape == rgb.shape[:2]:  # a mosaic in the output's grid: spread clipped photosites
         clipped = mosaic >= white
         if clipped.ndim == 3:  # a linear (already demosaiced) DNG holds one value per channel
-            clipped = clipped.any(axis=2)
+            clipped = np.any(clipped, axis=2)
         if clipped.any():
             saturated |= _grow_3x3(clipped)
     return RawDecode(image=image, saturated=saturated, black_level=black, white_level=white)
@@ -900,7 +901,8 @@ def write_image(
                     "or write to_display(image, exposure=...) which clips deliberately for display"
                 )
             if srgb is None:  # the same guess read_image makes, so a round trip is faithful
-                srgb = _READ_FORMATS[ext][1 if dtype == "uint8" else 2]
+                _, srgb8, srgb16 = _READ_FORMATS[ext]
+                srgb = srgb8 if dtype == "uint8" else srgb16
             if srgb:
                 alpha = 3 if channels == 4 else None
                 color = [c for c in range(channels) if c != alpha]
@@ -965,7 +967,7 @@ def _check_written(temp: Path, pixels: np.ndarray, dtype: str, metadata: dict | 
     finally:
         inp.close()
     expected = pixels.astype(np.float16) if dtype == "half" else pixels
-    if failed or np.shape(back) != expected.shape or not np.array_equal(back, expected):
+    if failed or back is None or np.shape(back) != expected.shape or not np.array_equal(back, expected):
         raise OSError(errno.EIO, "the image written does not read back as written (a full disk, or a failing one)")
     if metadata and read_metadata(temp) != json.loads(json.dumps(metadata)):
         raise OSError(errno.EIO, "the image written does not read back with its metadata")

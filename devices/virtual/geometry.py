@@ -275,7 +275,7 @@ def occluded(start: np.ndarray, end: np.ndarray, quads: Quads, *, group: np.ndar
     """
     n = len(start)
     out = np.zeros(n, bool)
-    if group is None:
+    if group is None or blockers is None:
         _occluded_by(start, end, quads, np.arange(len(quads)), out, np.arange(n))
         return out
     order = np.argsort(group, kind="stable")
