@@ -36,4 +36,4 @@ bench: $(STAMP)
 	$(PY) bench/recolor.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

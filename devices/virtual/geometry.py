@@ -272,6 +272,8 @@ def occluded(start: np.ndarray, end: np.ndarray, quads: Quads, *, group: np.ndar
     >>> q = Quads(np.array([[-1.0, -1, 1]]), np.array([[2.0, 0, 0]]), np.array([[0.0, 2, 0]]))
     >>> occluded(np.zeros((2, 3)), np.array([[0.0, 0, 2], [5.0, 0, 2]]), q).tolist()
     [True, False]
+    >>> occluded(np.zeros((2, 3)), np.array([[0.0, 0, 2], [5.0, 0, 2]]), q, group=np.array([0, 1])).tolist()
+    [True, False]
     """
     n = len(start)
     out = np.zeros(n, bool)
