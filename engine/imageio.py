@@ -521,7 +521,7 @@ def read_mask(path) -> np.ndarray:
     if alpha is not None and (pixels[..., alpha] < 1).any():
         return pixels[..., alpha] > 0
     colour = [c for c in range(pixels.shape[2]) if c != alpha]
-    return (pixels[..., colour] > 0).any(axis=2)
+    return np.any(pixels[..., colour] > 0, axis=2)
 
 
 def _alpha_index(path: Path, channels: int) -> int | None:
@@ -635,6 +635,7 @@ def decode_raw(source, *, name: str | None = None) -> RawDecode:
     ...     print(str(exc).split(" (")[0])
     DSC_0001.NEF: cannot decode RAW data
     """
+    data: io.BytesIO | str
     if isinstance(source, (bytes, bytearray, memoryview)):
         label = name or "<RAW bytes>"
         if len(source) == 0:
@@ -662,7 +663,7 @@ def decode_raw(source, *, name: str | None = None) -> RawDecode:
     if mosaic.shape == rgb.shape[:2]:  # a mosaic in the output's grid: spread clipped photosites
         clipped = mosaic >= white
         if clipped.ndim == 3:  # a linear (already demosaiced) DNG holds one value per channel
-            clipped = clipped.any(axis=2)
+            clipped = np.any(clipped, axis=2)
         if clipped.any():
             saturated |= _grow_3x3(clipped)
     return RawDecode(image=image, saturated=saturated, black_level=black, white_level=white)
@@ -682,7 +683,8 @@ def _decode_linear(raw) -> RawDecode:
     image = (values - black) / (np.float32(white) - black)
     np.maximum(image, 0.0, out=image)  # as LibRaw clips noise below black for mosaics
     saturated = np.any(values >= white, axis=2)
-    return RawDecode(image=np.ascontiguousarray(image), saturated=saturated, black_level=float(black.mean()), white_level=white)
+    return RawDecode(image=np.ascontiguousarray(image), saturated=saturated, black_level=float(black.mean()),
+                     white_level=white)
 
 
 def read_raw_bytes(data: bytes, *, name: str = "<RAW bytes>") -> np.ndarray:
@@ -777,7 +779,8 @@ def _metadata_texts(path: Path, metadata: dict | None) -> dict[str, str]:
     texts = {}
     for key, value in metadata.items():
         if not isinstance(key, str) or not key or not all(c.isalnum() or c in "_.-" for c in key):
-            raise InputError(f"{path}: metadata key {key!r} must be a non-empty string of letters, digits, '_', '.', '-'")
+            raise InputError(f"{path}: metadata key {key!r} must be a non-empty string of letters, digits, "
+                             "'_', '.', '-'")
         try:
             texts[key] = json.dumps(value, ensure_ascii=False, allow_nan=False)
         except (TypeError, ValueError) as exc:
@@ -877,7 +880,8 @@ def write_image(
     if integer_input:
         if str(array.dtype) != dtype:
             raise InputError(
-                f"{path}: a {array.dtype} image is written verbatim and needs dtype={str(array.dtype)!r}, got {dtype!r}; "
+                f"{path}: a {array.dtype} image is written verbatim and needs dtype={str(array.dtype)!r}, "
+                f"got {dtype!r}; "
                 "pass a float image to convert"
             )
         pixels = np.ascontiguousarray(array)
@@ -887,7 +891,8 @@ def write_image(
             raise InputError(f"{path}: image contains {bad} non-finite values (NaN or inf); refusing to write")
         pixels = np.ascontiguousarray(array, dtype=np.float32)
         if dtype == "half" and np.abs(pixels).max() > 65504.0:
-            raise InputError(f"{path}: values up to {np.abs(pixels).max():g} overflow half floats (max 65504); use dtype='float'")
+            raise InputError(f"{path}: values up to {np.abs(pixels).max():g} overflow half floats (max 65504); "
+                             "use dtype='float'")
         if dtype in ("uint8", "uint16"):
             lo, hi = float(pixels.min()), float(pixels.max())
             if lo < 0.0 or hi > 1.0:
@@ -896,7 +901,8 @@ def write_image(
                     "or write to_display(image, exposure=...) which clips deliberately for display"
                 )
             if srgb is None:  # the same guess read_image makes, so a round trip is faithful
-                srgb = _READ_FORMATS[ext][1 if dtype == "uint8" else 2]
+                _, srgb8, srgb16 = _READ_FORMATS[ext]
+                srgb = srgb8 if dtype == "uint8" else srgb16
             if srgb:
                 alpha = 3 if channels == 4 else None
                 color = [c for c in range(channels) if c != alpha]
@@ -961,7 +967,7 @@ def _check_written(temp: Path, pixels: np.ndarray, dtype: str, metadata: dict | 
     finally:
         inp.close()
     expected = pixels.astype(np.float16) if dtype == "half" else pixels
-    if failed or np.shape(back) != expected.shape or not np.array_equal(back, expected):
+    if failed or back is None or np.shape(back) != expected.shape or not np.array_equal(back, expected):
         raise OSError(errno.EIO, "the image written does not read back as written (a full disk, or a failing one)")
     if metadata and read_metadata(temp) != json.loads(json.dumps(metadata)):
         raise OSError(errno.EIO, "the image written does not read back with its metadata")
