@@ -2,7 +2,7 @@
 
 A camera backend never passes gamma-encoded values on (DESIGN.md, "Devices"). Webcams and
 8-bit files are linearised through a :class:`ResponseCurve` (supplied, or measured with OpenCV's
-Debevec calibration). RAW files are decoded by :func:`engine.imageio.decode_raw`, and clipped
+Debevec calibration). RAW files are decoded by :func:`engine.raw.decode_raw`, and clipped
 frames are completed from shorter exposures by the acquisition Recorder
 (``engine.acquire.recorder``), the one HDR merge.
 """

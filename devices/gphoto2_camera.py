@@ -19,6 +19,9 @@ handle after ``exit()`` fails with libgphoto2's virtual USB camera and corrupts 
 
 Rig names: ``"gphoto2"`` (the first camera found), ``"gphoto2:usb:001,004"`` (a port) or
 ``"gphoto2:Nikon DSC D7100"`` (a model as listed by :func:`list_cameras`).
+
+Over 500 lines on purpose: every call into libgphoto2 (listing, opening, configuration widgets,
+capture, download, reconnect) stays in this one module, the only one that knows its API.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from devices.base import Frame
 from devices.registry import Availability
 from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
-from engine.imageio import RAW_EXTENSIONS, decode_raw
+from engine.raw import RAW_EXTENSIONS, decode_raw
 
 __all__ = ["GPhoto2Camera", "list_cameras", "open_camera", "parse_shutter", "probe"]
 

@@ -4,7 +4,7 @@ Many camera makers ship tethering programs (Canon EOS Utility, Nikon Camera Cont
 Capture One, Sony Imaging Edge) that save each shot into a folder. This backend watches that
 folder: :meth:`HotFolderCamera.capture` optionally runs a trigger command, then waits for the
 next *new* file, waits until it is complete (same size on two polls and decodable), decodes it
-linearly (RAW through :func:`engine.imageio.decode_raw`; TIFF, EXR and PNG through
+linearly (RAW through :func:`engine.raw.decode_raw`; TIFF, EXR and PNG through
 :func:`engine.imageio.read_image`) and returns linear radiance.
 
 Rig name: ``"hotfolder:/path/to/folder"``, e.g.
@@ -27,7 +27,8 @@ from devices.base import Frame
 from devices.registry import Availability
 from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
-from engine.imageio import RAW_EXTENSIONS, decode_raw, image_info, read_image
+from engine.imageio import image_info, read_image
+from engine.raw import RAW_EXTENSIONS, decode_raw
 
 __all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_camera", "probe"]
 

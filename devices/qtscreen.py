@@ -14,6 +14,9 @@ A projector on the second screen, driven from an acquisition worker::
     projector = open_projector("HDMI-1", settle=0.15)   # on the UI thread
     projector.identify()                   # name, resolution and a grid, to check the wiring
     projector.show(pattern)                # from any thread; returns once the frame is up
+
+Over 500 lines on purpose: the projector window, the screen list (with EDID identity) and the
+cross-thread hand-off of patterns are one Qt object's life cycle.
 """
 
 from __future__ import annotations

@@ -30,6 +30,9 @@ the arrays every capture reuses:
 Arrays are stored as ``.npz`` (never pickle), keyed by a hash of the scene file's content,
 the options that change geometry and :data:`MODEL_VERSION`; a missing or corrupt cache file
 is rebuilt, and deleting the cache directory is always safe.
+
+Over 500 lines on purpose: geometry sampling, the radiosity solve and the set-up cache are one
+versioned computation (:data:`MODEL_VERSION` covers all three).
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@ References
 ----------
 S. Inokuchi, K. Sato, F. Matsuda, "Range imaging system for 3-D object recognition", ICPR 1984
 (cited by the paper, Sec. 6, for its correspondences).
+
+Over 500 lines on purpose: pattern generation, decoding and the decode-quality checks of one
+code must agree bit for bit, so they live together.
 """
 
 from __future__ import annotations
