@@ -16,8 +16,8 @@ from engine.colour import (
     to_lab,
 )
 from engine.decompose import Decomposition
-from engine.figurate import transport_matrix
 from engine.errors import InputError
+from engine.figurate import transport_matrix
 
 
 @pytest.mark.parametrize("text", ["#3355cc", "#35c", "3355cc", "#3355CC"])
