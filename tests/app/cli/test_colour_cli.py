@@ -68,11 +68,18 @@ def test_a_colour_sets_kappa_and_keeping_luminance_keeps_it(scene, capsys):
     np.testing.assert_allclose(kept / kept.sum(), wanted / wanted.sum(), rtol=1e-6)
 
 
-def test_a_checker_makes_albedo_absolute(scene):
-    tmp, truth = scene
+@pytest.fixture(scope="module")
+def measured(scene):
+    """The scene after `albedit checker`: its stderr."""
+    tmp, _ = scene
     result = _run("checker", tmp / "s", *RIG)
     assert result.returncode == 0, result.stderr
-    err = result.stderr
+    return result.stderr
+
+
+def test_a_checker_makes_albedo_absolute(scene, measured):
+    tmp, truth = scene
+    err = measured
     assert "colour checker (detected): 24 of 24 patches fit" in err and "corners (dark skin" in err
     panel_line = [line for line in err.splitlines() if line.startswith("panel: absolute albedo")]
     assert len(panel_line) == 1
@@ -121,3 +128,26 @@ def test_a_recolor_the_captured_order_cannot_follow_is_written_with_a_warning(tm
     assert warning and "has not converged at order 2" in warning[0] and "in B" in warning[0]
     assert "capture a higher order or ask for a smaller change" in warning[0]
     assert (tmp_path / "w.exr").exists()
+
+
+def test_the_app_model_sees_the_sessions_colours(scene, measured):
+    """Opened in the app's model: the panel's albedo, the eyedropper on the wall, a typed albedo."""
+    from app.model.colour import ColourEditor, session_colours
+    from app.model.files import open_document
+
+    tmp, truth = scene
+    doc, session, warnings = open_document(tmp / "s")
+    assert warnings == []
+    editor = ColourEditor(doc, session_colours(doc, session))
+    panel, wall = doc.by_name("panel"), doc.by_name("right_wall")
+    assert editor.albedo_text(panel.uid).startswith("albedo (")
+    np.testing.assert_allclose(editor.colour(panel.uid).albedo, truth["panel"], rtol=0.02)
+    assert editor.colours[wall.uid].direct is not None and editor.colours[wall.uid].albedo is not None
+    editor.request_albedo(panel.uid, [0.3, 0.3, 0.3])
+    np.testing.assert_allclose(truth["panel"] * panel.kappa, 0.3, rtol=0.02)
+    ys, xs = np.nonzero(wall.mask)
+    editor.pick(panel.uid, xs[len(xs) // 2], ys[len(ys) // 2])
+    new = truth["panel"] * panel.kappa
+    np.testing.assert_allclose(new / new.sum(), truth["right_wall"] / truth["right_wall"].sum(), rtol=0.02)
+    low, high = editor.kappa_range(panel.uid)
+    assert low == 0 and np.all(high * editor.colour(panel.uid).albedo <= 1 + 1e-9)
