@@ -95,6 +95,7 @@ def run_checker(rig, session: Session, *, corners=None, frames: int = 1, sensiti
     finished without a saved edit gets its edit saved first: the chart's captures would
     otherwise change the cache key its decomposition is found under.
     """
+    placed = None if corners is None else checker_from_corners(corners, session.camera_resolution)
     with session.writing("measuring the colour checker"):
         calibration = load_calibration(session)
         check_rig(calibration, rig)
@@ -104,7 +105,7 @@ def run_checker(rig, session: Session, *, corners=None, frames: int = 1, sensiti
         recorder = Recorder(rig, session, progress=progress, should_stop=should_stop, frames=frames)
         recorder.planned = recorder.count + 2 + pattern_budget(True)
         base = recorder.capture("checker-black", recorder.black(), meta={"kind": "black"})
-        checker = _place(recorder, base, corners)
+        checker = placed or _detect(recorder, base)
         prefix = f"checker-{mask_digest(checker.mask())[:8]}"
         chart = measure_checker(recorder, calibration, checker, base, name=prefix, sensitivities=sensitivities)
         record = CheckerRecord(checker, prefix, sensitivities, ILLUMINANT, chart.scale, chart.patch_direct)
@@ -112,9 +113,7 @@ def run_checker(rig, session: Session, *, corners=None, frames: int = 1, sensiti
         return record
 
 
-def _place(recorder: Recorder, base: np.ndarray, corners) -> Checker:
-    if corners is not None:
-        return checker_from_corners(corners, base.shape[:2])
+def _detect(recorder: Recorder, base: np.ndarray) -> Checker:
     try:
         return detect_checker(base)
     except InputError as first:

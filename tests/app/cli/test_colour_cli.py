@@ -117,17 +117,42 @@ def test_bad_colour_requests_are_one_line_errors(scene, args, message):
     assert not (tmp / "e.exr").exists()
 
 
-def test_a_recolor_the_captured_order_cannot_follow_is_written_with_a_warning(tmp_path):
-    """The paper's κ on the Cornell wall at order 2: 10 % of the blue light is in the last component."""
+@pytest.fixture(scope="module")
+def cornell(tmp_path_factory):
+    """virtual:cornell (ideal, 32²), its right wall captured at order 2."""
+    path = tmp_path_factory.mktemp("cornell") / "s"
     rig = ["--rig", "virtual:cornell", "--ideal", "--resolution", "32"]
-    assert main(["calibrate", str(tmp_path / "s"), *rig]) == 0
-    assert main(["capture", str(tmp_path / "s"), *rig, "--target", "right_wall", "--order", "2"]) == 0
-    result = _run("recolor", tmp_path / "s", "--kappa", "2,0.125,8", "-o", tmp_path / "w.exr")
+    assert main(["calibrate", str(path), *rig]) == 0
+    assert main(["capture", str(path), *rig, "--target", "right_wall", "--order", "2"]) == 0
+    return path, rig
+
+
+def test_a_recolor_the_captured_order_cannot_follow_is_written_with_a_warning(cornell, tmp_path):
+    """The paper's κ on the Cornell wall at order 2: 10 % of the blue light is in the last component."""
+    path, _ = cornell
+    result = _run("recolor", path, "--kappa", "2,0.125,8", "-o", tmp_path / "w.exr")
     assert result.returncode == 0, result.stderr
     warning = [line for line in result.stderr.splitlines() if "warning:" in line]
     assert warning and "has not converged at order 2" in warning[0] and "in B" in warning[0]
     assert "capture a higher order or ask for a smaller change" in warning[0]
     assert (tmp_path / "w.exr").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    ([], "no ColorChecker found in the photograph: place its four corners by hand"),
+    (["--corners", "1,1 30,1 30,20"], "corners are four x,y camera pixels"),
+    (["--corners", "1,1 30,1 1,20 30,20"], "do not form a convex quadrilateral"),
+    (["--corners", "1,1 40,1 40,20 1,20"], "lie outside the 32×32 image"),
+])
+def test_a_checker_that_cannot_be_placed_is_a_one_line_error(cornell, args, message):
+    path, rig = cornell
+    result = _run("checker", path, *rig, *args)
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    assert message in result.stderr.strip().splitlines()[-1]
+    session = Session.open(path)
+    assert "colour" not in session.state
+    if args:  # bad corners are refused before anything is captured
+        assert not any(c.name.startswith("checker") for c in session.captures)
 
 
 def test_the_app_model_sees_the_sessions_colours(scene, measured):
