@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,gphoto2,harvesters]"
+	$(PY) -m pip install --quiet -e ".[test,gphoto2,harvesters,mitsuba]"
 	# without its dependencies: it pins opencv-python, whose cv2 would replace the contrib build's
 	$(PY) -m pip install --quiet --no-deps "colour-checker-detection>=0.2.3"
 	touch $(STAMP)

@@ -69,11 +69,12 @@ def main() -> None:
     results = {
         "loopback": _run(f"loopback:{args.scene}", {**shared, "file_format": args.format}, work / "loopback",
                          args.target, args.order),
-        "virtual": _run(f"virtual:{args.scene}", {**shared, "resolution": CAMERA, "projector_resolution": PROJECTOR},
+        "virtual": _run(f"virtual:{args.scene}",
+                        {**shared, "resolution": CAMERA, "projector_resolution": PROJECTOR, "supersample": 1},
                         work / "virtual", args.target, args.order),
     }
     scene = f"virtual:{args.scene}"
-    with devices.open_rig(scene, resolution=CAMERA, projector_resolution=PROJECTOR, cache_dir=cache) as rig:
+    with devices.open_rig(scene, resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1, cache_dir=cache) as rig:
         mask = rig.targets[args.target]
         truth = rig.truth.recolor([(mask, kappa)])
         surfaces = ~rig.truth.emitters()

@@ -78,7 +78,7 @@ FORMATS = {"tiff": ".tif", "dng": ".dng", "exr": ".exr"}
 FAULTS = ("drop", "partial", "twice", "close")
 
 _OPTIONS = ("projector", "settle", "projector_timeout", "resolution", "folder", "file_format", "timeout", "poll",
-            "quiet", "seed", "cache_dir", "patch_size", "faults")
+            "quiet", "seed", "cache_dir", "patch_size", "supersample", "faults")
 
 # the trigger: a command that leaves a "shutter" file for the bench camera (no shell, any OS)
 _SHUTTER = "import sys; open(sys.argv[1], 'a').close()"
@@ -322,6 +322,11 @@ def open_rig(arg: str, **options) -> LoopbackRig:
         The sensor noise seed (default 0, as the virtual rig's).
     cache_dir, patch_size
         As for the virtual rig.
+    supersample : int
+        Sub-samples per camera pixel edge (default 1). The bench's camera is much coarser than the
+        projector window (64×48 against 1024×768: 16 projector pixels per camera pixel), so
+        mixed pixels would average the finest Gray-code stripes away; the bench proves the device
+        paths, and the virtual rig's own supersampling (default 4) shows the optics.
     faults : dict[int, str], optional
         Shot number -> fault (module notes).
 
@@ -356,6 +361,7 @@ def open_rig(arg: str, **options) -> LoopbackRig:
     scene = camera = None
     try:
         vopts = {k: options[k] for k in ("seed", "cache_dir", "patch_size") if k in options}
+        vopts["supersample"] = options.get("supersample", 1)
         resolution = options.get("resolution", (48, 64))
         scene = virtual.open_rig(arg, resolution=resolution, projector_resolution=projector.resolution, **vopts)
         scene.camera.model, exposure = _sensor(scene)

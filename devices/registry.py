@@ -32,6 +32,7 @@ _BACKENDS = {
     "loopback": "devices.loopback",
     "gphoto2": "devices.gphoto2_camera",
     "harvesters": "devices.harvesters_camera",
+    "mitsuba": "devices.mitsuba",
 }
 
 # projector backend name -> module implementing ``open_projector(arg, **options) -> Projector``,

@@ -36,6 +36,11 @@ class Frame:
     metadata : dict
         Backend-specific facts (device name, raw file name, settle time, frames averaged,
         exposure brackets, ...), JSON-serialisable.
+    full_scale : float or None
+        Radiance at which this frame clips (the sensor's full well or white level, in the units
+        of ``image`` at this exposure and gain), when the backend knows it; ``math.inf`` for a
+        camera that does not clip at all (an ideal simulated sensor). Exposure control judges
+        the bright end against it instead of waiting for pixels to clip.
     """
 
     image: np.ndarray
@@ -44,6 +49,7 @@ class Frame:
     black_level: float = 0.0
     saturated: np.ndarray = None  # type: ignore[assignment]  # filled in __post_init__
     metadata: dict[str, Any] = field(default_factory=dict)
+    full_scale: float | None = None
 
     def __post_init__(self) -> None:
         if self.saturated is None:

@@ -94,8 +94,12 @@ def open_document(path, *, history=None) -> tuple[Document, Session | None, list
         doc, warnings = _document_from_session(session, history=history)
         return doc, session, warnings
     image = imageio.read_image(path)
-    if image.ndim != 3 or image.shape[2] < 3:
-        raise InputError(f"{path}: an RGB image is needed, got shape {image.shape}")
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
+        raise InputError(f"{path}: a grey or RGB image is needed, got shape {image.shape}")
+    if image.shape[2] < 3:  # grey (and alpha): the same light in every channel
+        image = np.repeat(image[..., :1], 3, axis=2)
     doc = Document(np.ascontiguousarray(image[..., :3]), history=history, source=str(path))
     return doc, None, []
 

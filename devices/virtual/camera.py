@@ -67,6 +67,22 @@ class CameraModel:
         """The ideal camera: returns the radiance exactly, clipping only at 1e12 electrons."""
         return cls(black_level=0.0, read_noise=0.0, bits=64, full_well=1e12, ideal=True)
 
+    def full_scale(self, exposure: float, gain: float) -> float:
+        """Radiance at which a pixel clips at ``exposure`` and ``gain`` (``inf`` for the ideal camera,
+        whose 1e12-electron well no scene reaches: it returns radiance at any exposure).
+
+        Examples
+        --------
+        >>> m = CameraModel.realistic()
+        >>> round(m.full_scale(0.01, 1.0), 4)  # the ADC's white level comes before the full well here
+        4.9597
+        """
+        if self.ideal:
+            return float("inf")
+        well = self.full_well
+        adc = (self.white_level - self.black_level) * self.electrons_per_dn / gain
+        return min(well, adc) / (self.electrons_per_radiance * exposure)
+
     @property
     def calibration(self) -> float:
         """Raw counts per unit radiance per second at gain 1."""
@@ -229,7 +245,8 @@ class VirtualCamera:
                 "white_level": self.model.white_level, "read_noise_e": self.model.read_noise,
                 "electrons_per_dn": self.model.electrons_per_dn}
         return Frame(image=image, exposure=self._exposure, gain=self._gain,
-                     black_level=self.model.black_level, saturated=saturated, metadata=meta)
+                     black_level=self.model.black_level, saturated=saturated, metadata=meta,
+                     full_scale=self.model.full_scale(self._exposure, self._gain))
 
     def _frame_rng(self) -> np.random.Generator:
         """The noise of this frame: from the rig's seed and :attr:`frame_identity` when the recorder set one.

@@ -29,6 +29,8 @@ from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
 from engine.recolor import recolor
+from engine.session.edit import mask_digest, mask_name
+from engine.session.paths import NAME
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,6 +167,21 @@ class _Plan:
         return recolor(self.prepared[t].decompose(obs), self.kappas[t])
 
 
+def capture_stem(target: str, mask) -> str:
+    """The part of a target's capture names that names the target.
+
+    The display name itself when it is a safe file name; otherwise (spaces, punctuation, any
+    text a user may type) the session's rule for mask files, :func:`engine.session.edit.mask_name`.
+
+    Examples
+    --------
+    >>> m = np.eye(3, dtype=bool)
+    >>> capture_stem("right_wall", m), capture_stem("target 1", m)
+    ('right_wall', 'target_1-7ea71875')
+    """
+    return target if NAME.fullmatch(target) and len(target) <= 64 else mask_name(target, mask_digest(mask))
+
+
 def acquire_cascade(
     recorder: Recorder,
     calibration: Calibration,
@@ -231,11 +248,13 @@ def acquire_cascade(
             f"fixed_kappa must give the κ of every target but the last ({len(targets) - 1}), got {len(fixed_kappa)}"
         )
     kappas = [check_kappa(kap, 3, name=f"fixed_kappa[{i}]") for i, kap in enumerate(fixed_kappa)]
-    total = np.zeros(calibration.camera_resolution, int)
-    for _, m in targets:
-        total += m.astype(bool)
-    if (total > 1).any():
-        raise InputError("targets overlap: a pixel may belong to one target only")
+    total = np.zeros(calibration.camera_resolution, np.float64)
+    for _, m in targets:  # hard masks count 1 per pixel; soft masks their coverage
+        m = np.asarray(m)
+        total += m if m.dtype.kind == "f" else m.astype(bool)
+    if (total > 1 + 1e-6).any():
+        raise InputError("targets overlap: a pixel may belong to one target only "
+                         "(soft masks: coverages may not sum past 1)")
     rig = recorder.rig
     identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
@@ -250,7 +269,7 @@ def acquire_cascade(
     base = photograph if photograph_pattern is None else recorder.capture(f"{prefix}-black", recorder.black(), meta={"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{n}")
+            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{capture_stem(n, m)}")
             for n, m in targets
         ]
     plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)

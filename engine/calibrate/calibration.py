@@ -28,6 +28,10 @@ _ARRAYS = {
 }
 
 
+#: fingerprint entries said in words by :meth:`Calibration.check_compatible` itself
+_RESOLUTION_KEYS = ("camera resolution", "projector resolution")
+
+
 @dataclass(frozen=True, eq=False)
 class Calibration:
     """Everything measured about a rig that acquisition needs.
@@ -103,22 +107,20 @@ class Calibration:
             raise InputError(
                 f"calibration was made for rig {self.rig_name!r}, this rig is {rig_name!r}; recalibrate"
             )
+        resolutions = []  # every difference in one message, so one recalibration fixes them all
         if cam != self.camera_resolution:
-            raise InputError(
-                f"calibration was made for camera {wh(self.camera_resolution)}, this rig's camera is "
-                f"{wh(cam)}; recalibrate"
-            )
+            resolutions.append(f"camera {wh(self.camera_resolution)}, this rig's camera is {wh(cam)}")
         if proj != self.projector_resolution:
-            raise InputError(
-                f"calibration was made for projector {wh(self.projector_resolution)}, this rig's projector is "
-                f"{wh(proj)}; recalibrate"
-            )
+            resolutions.append(f"projector {wh(self.projector_resolution)}, this rig's projector is {wh(proj)}")
         made_with = self.metadata.get("rig_fingerprint")
+        others = []
         if fingerprint is not None and isinstance(made_with, dict):
-            differences = fingerprint_differences(made_with, fingerprint)
-            if differences:
-                raise InputError(f"calibration was made with another set-up of rig {rig_name!r}: "
-                                 f"{'; '.join(differences)}; recalibrate")
+            others = [d for d in fingerprint_differences(made_with, fingerprint) if not d.startswith(_RESOLUTION_KEYS)]
+        if resolutions:
+            raise InputError(f"calibration was made for {'; '.join(resolutions + others)}; recalibrate")
+        if others:
+            raise InputError(f"calibration was made with another set-up of rig {rig_name!r}: "
+                             f"{'; '.join(others)}; recalibrate")
 
     def to_dict(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """Split into a JSON-serialisable description and named arrays (no pickle).

@@ -70,6 +70,7 @@ def test_simulated_camera_captures_linear_frames(viky):
     cam = HarvestersCamera(viky, serial="1")
     try:
         assert cam.pixel_format == "Mono8" and cam.resolution == (400, 400)  # RGBa8 is not linear-unpacked
+        assert cam.fingerprint["serial"] == "1" and cam.fingerprint["model"]  # a calibration is of this body
         assert cam.warnings == [
             "the camera has no ExposureTime feature: radiance is in relative units (exposure recorded as 1 s)"
         ]

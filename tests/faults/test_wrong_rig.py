@@ -62,7 +62,8 @@ def test_the_command_line_refuses_reusing_a_calibration_of_another_set_up(tmp_pa
     assert albedit("calibrate", tmp_path / "cal", *rig, "--ideal", "--levels", "5")[0] == 0
     tally.injected += 1
     refused(albedit, tally, "capture", tmp_path / "new", *rig, "--calibration", tmp_path / "cal",
-            "--target", "right_wall", "--order", "2", match="ideal True then, False now; recalibrate")
+            "--target", "right_wall", "--order", "2",
+            match="ideal True then, False now; supersample 1 then, 4 now; recalibrate")
     assert not (tmp_path / "new").exists()
     refused(albedit, tally, "capture", tmp_path / "cal", *rig, "--target", "right_wall", "--order", "2",
             match="ideal True then, False now")

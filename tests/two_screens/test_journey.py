@@ -83,7 +83,7 @@ def test_calibrate_and_acquire_on_the_loopback_bench(window, qtbot, tmp_path, di
     doc.add_target(TARGET, rig.targets[TARGET])
     window.set_document(doc, window.session, rig=rig)
     window.acquire()
-    panel = window._acquisition_dock.widget()
+    panel = window.rigs.panel  # the acquisition dock's panel (RigControl keeps the rig, the wizard and the dock)
     with qtbot.waitSignals([panel.acquired], raising=False, timeout=TIMEOUT_MS, check_params_cbs=None) as done:
         assert panel.start() is not None
         qtbot.waitUntil(lambda: panel.result is not None or bool(dialogs), timeout=TIMEOUT_MS)

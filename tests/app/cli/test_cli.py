@@ -1,5 +1,6 @@
 """The headless CLI: help everywhere, the demo end to end, one-line errors and exit codes."""
 
+import re
 import subprocess
 import sys
 
@@ -25,11 +26,14 @@ def test_every_command_has_help(command, capsys):
 
 def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     out = tmp_path / "demo"
-    result = _run("demo", "-o", str(out), "--ideal", "--resolution", "32", "--frames", "1", "--denoise", "0")
+    result = _run("demo", "-o", str(out), "--resolution", "32")  # the app's default rig: ideal
     assert result.returncode == 0, result.stderr
-    error = float(result.stdout.strip())
-    assert error < 0.5  # percent, ideal rig at 32x32
-    assert "relative error vs ground truth" in result.stderr
+    headline = re.fullmatch(r"relative error vs ground truth on the surfaces \(ideal rig, the lamp left out\): "
+                            r"Albedit ([0-9.]+) %, naive per-pixel recolor ([0-9.]+) %", result.stdout.strip())
+    assert headline, result.stdout
+    ours, naive = (float(v) for v in headline.groups())
+    assert ours < 0.5 and naive > 10 * ours  # percent, ideal rig at 32x32: like with like, the surfaces
+    assert "noise reduction: off: the components' noise is" in result.stderr  # noise-free data are left alone
     for name in ("recolored.exr", "recolored.png", "truth.png", "error.png", "photograph.png"):
         assert (out / name).exists(), name
     assert read_image(out / "recolored.exr").shape == (32, 32, 3)
@@ -43,6 +47,18 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     np.testing.assert_allclose(read_image(tmp_path / "export.tif"), read_image(out / "recolored.exr"), rtol=1e-6)
 
 
+def test_demo_runs_on_the_path_traced_rig(tmp_path):
+    pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+    out = tmp_path / "demo"
+    result = _run("demo", "-o", str(out), "--rig", "mitsuba:cornell", "--ideal", "--resolution", "16", "--spp", "16",
+                  "--order", "2", "--kappa", "1,0.5,1", "--denoise", "0")
+    assert result.returncode == 0, result.stderr
+    assert read_image(out / "recolored.exr").shape == (16, 16, 3)
+    headline = re.fullmatch(r"relative error vs ground truth on the surfaces \(ideal path-traced rig, the lamp left "
+                            r"out\): Albedit ([0-9.]+) %, naive per-pixel recolor ([0-9.]+) %", result.stdout.strip())
+    assert headline and float(headline.group(1)) < 25  # percent: 16 spp renders, a 16² box
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -51,6 +67,7 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
         (["capture", "{tmp}/nowhere", "--target", "right_wall"], "no session folder"),
         (["calibrate", "{tmp}/s", "--rig", "nosuch:0"], "unknown rig backend"),
         (["demo", "-o", "{tmp}/d", "--target", "ceiling", "--resolution", "16"], "has no target"),
+        (["demo", "-o", "{tmp}/d", "--rig", "opencv:0"], "must be a rig with ground truth"),
     ],
 )
 def test_bad_input_gives_one_line_errors_and_nonzero_exit(tmp_path, args, message):
@@ -90,3 +107,11 @@ def test_an_edit_saved_by_the_app_exports_from_the_command_line(acquired_doc, tm
     assert cli_meta == app_meta and cli_meta["edit"]["source"] == "synthetic"
     assert cli_meta["edit"]["cascade"] == ["floor", "Wand — links"] and cli_meta["edit"]["kappa"] == [2.0, 0.125, 1.5]
     assert [t["name"] for t in cli_meta["edit"]["targets"]] == ["floor", "Wand — links", "target 3"]
+
+
+def test_devices_lists_rigs_and_projectors(capsys):
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    rigs, projectors = out.split("Projectors")
+    assert "virtual:cornell: available" in rigs
+    assert "qtscreen:0: available" in projectors  # the offscreen platform's one screen
