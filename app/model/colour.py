@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.model.document import KAPPA_MIN, Document
+from app.model.document import KAPPA_MAX, Document
 from engine.checks import check_kappa
 from engine.colour import parse_colour, pick_colour, to_hex
 from engine.errors import InputError
@@ -27,8 +27,12 @@ __all__ = ["ColourEditor", "linked_kappa", "session_colours"]
 UNBOUNDED = 16.0
 
 
-def linked_kappa(kappa, channel: int, value: float, *, ceiling=None) -> np.ndarray:
-    """κ after setting ``channel`` to ``value`` with the channels linked: their ratio is kept.
+def linked_kappa(kappa, channel: int, value: float, *, linked: bool = True, low: float = 0.0,
+                 high=KAPPA_MAX) -> np.ndarray:
+    """κ after setting ``channel`` to ``value``: alone, or with every channel by the same factor.
+
+    A linked change stops where the first channel reaches ``low`` or ``high``, so the ratios
+    between the channels (the hue of the change) never change.
 
     Parameters
     ----------
@@ -38,9 +42,13 @@ def linked_kappa(kappa, channel: int, value: float, *, ceiling=None) -> np.ndarr
         0, 1 or 2 (R, G, B).
     value : float
         The new κ of that channel, ≥ 0.
-    ceiling : (3,) float, optional
-        Per-channel top of the range: the common factor is limited so that no channel passes
-        its top (the ratio is kept rather than one channel clipped).
+    linked : bool
+        Move every channel by one factor (a channel at 0 moves alone: there is no ratio to keep).
+    low : float
+        Bottom of the range (the log slider's 1/16; 0 for typed values).
+    high : float or (3,) float
+        Top of the range per channel (the slider's 16, or the κ ceiling of
+        :meth:`ColourEditor.kappa_range`).
 
     Returns
     -------
@@ -50,24 +58,26 @@ def linked_kappa(kappa, channel: int, value: float, *, ceiling=None) -> np.ndarr
     --------
     >>> linked_kappa([1.0, 2.0, 4.0], 0, 2.0).tolist()
     [2.0, 4.0, 8.0]
-    >>> linked_kappa([1.0, 2.0, 4.0], 0, 2.0, ceiling=[10, 10, 6]).tolist()
+    >>> linked_kappa([1.0, 2.0, 4.0], 0, 2.0, high=[10, 10, 6]).tolist()
     [1.5, 3.0, 6.0]
-    >>> linked_kappa([0.0, 1.0, 1.0], 0, 0.5).tolist()   # from black the channels meet
-    [0.5, 0.5, 0.5]
+    >>> linked_kappa([2.0, 0.125, 8.0], 2, 1.0, low=1 / 16).tolist()  # G stops at 1/16: B can only halve
+    [1.0, 0.0625, 4.0]
+    >>> linked_kappa([2.0, 0.125, 8.0], 2, 1.0, linked=False).tolist()
+    [2.0, 0.125, 1.0]
     """
     k = check_kappa(kappa, 3).copy()
     if channel not in (0, 1, 2):
         raise InputError(f"channel must be 0, 1 or 2 (R, G, B), got {channel!r}")
     value = float(check_kappa(value, 1)[0])
-    factor_base = k[channel]
-    new = k * (value / factor_base) if factor_base > 0 else np.full(3, value)
-    if ceiling is not None:
-        top = np.asarray(ceiling, np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            over = np.where(new > 0, top / new, np.inf)
-        shrink = min(float(np.min(over)), 1.0)
-        new = new * shrink
-    return new
+    if not linked or k[channel] <= 0:
+        k[channel] = value
+        return k
+    top = np.broadcast_to(np.asarray(high, np.float64), (3,))
+    positive = k > 0
+    lo = float(low) / k[positive].min()
+    hi = float(np.min(top[positive] / k[positive]))
+    factor = min(max(value / k[channel], lo), hi)
+    return k * factor
 
 
 def session_colours(document: Document, session: Session | None) -> dict[int, TargetColour]:
@@ -141,7 +151,7 @@ class ColourEditor:
             return c.relative or RELATIVE
         now = ", ".join(f"{v:.3f}" for v in c.new_albedo(kappa))
         was = ", ".join(f"{v:.3f}" for v in c.albedo)
-        return f"albedo ({now}); measured ({was})"
+        return f"Absolute albedo {now} (measured {was})"
 
     def kappa_range(self, uid: int) -> tuple[float, np.ndarray]:
         """``(low, high)`` of the κ controls: 0 (black) up to the ceiling per channel.
@@ -166,15 +176,6 @@ class ColourEditor:
         warning = self.check(uid, k)
         self.doc.set_kappa(uid, k)
         return warning
-
-    def set_channel(self, uid: int, channel: int, value: float, *, linked: bool) -> str:
-        """One channel's κ from the slider or the numeric entry; linked channels keep their ratio."""
-        kappa = self.doc.target(uid).kappa.copy()
-        if linked:
-            kappa = linked_kappa(kappa, channel, value, ceiling=self._refusal_ceiling(uid))
-        else:
-            kappa[channel] = float(check_kappa(value, 1)[0])
-        return self.set_kappa(uid, kappa)
 
     def request_colour(self, uid: int, colour, *, exposure: float = 0.0) -> str:
         """The target takes a colour: text (``"#3355cc"``, ``"lab:…"``, …) or linear RGB meant at ``exposure`` stops."""
@@ -209,8 +210,3 @@ class ColourEditor:
         """The eyedropper on a reference picture (sRGB-encoded unless ``encoded`` is False): a colour from elsewhere."""
         seen = pick_colour(image, x, y, radius=radius, encoded=encoded)
         return self.request_colour(uid, seen, exposure=exposure)
-
-    def _refusal_ceiling(self, uid: int) -> np.ndarray | None:
-        """Per channel, the κ a linked move must not reach (1 / albedo, just below), when absolute albedo is known."""
-        albedo = self.colour(uid).albedo
-        return None if albedo is None else np.maximum((1.0 - 1e-6) / albedo, KAPPA_MIN)

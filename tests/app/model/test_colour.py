@@ -58,7 +58,7 @@ def test_an_albedo_needs_a_reference_and_impossible_ones_change_nothing(acquired
     editor, wall = _editor(doc, albedo=[0.1, 0.8, 0.1])
     editor.request_albedo(wall, [0.2, 0.1, 0.8])
     np.testing.assert_allclose(doc.target(wall).kappa, [2, 0.125, 8])
-    assert editor.albedo_text(wall) == "albedo (0.200, 0.100, 0.800); measured (0.100, 0.800, 0.100)"
+    assert editor.albedo_text(wall) == "Absolute albedo 0.200, 0.100, 0.800 (measured 0.100, 0.800, 0.100)"
     for impossible in ([0.2, 1.0, 0.8], [0.2, 0.1, 1.5]):
         with pytest.raises(InputError, match="impossible"):
             editor.request_albedo(wall, impossible)
@@ -73,17 +73,19 @@ def test_an_albedo_needs_a_reference_and_impossible_ones_change_nothing(acquired
 
 def test_linked_channels_keep_their_ratio_and_stop_below_albedo_one(acquired_doc):
     np.testing.assert_allclose(linked_kappa([1, 2, 4], 2, 2), [0.5, 1, 2])
-    np.testing.assert_allclose(linked_kappa([1, 2, 4], 1, 4, ceiling=[10, 10, 5]), [1.25, 2.5, 5])
+    np.testing.assert_allclose(linked_kappa([1, 2, 4], 1, 4, high=[10, 10, 5]), [1.25, 2.5, 5])
+    np.testing.assert_allclose(linked_kappa([1, 2, 4], 2, 0), [0, 0, 0])  # typed 0: black
+    np.testing.assert_allclose(linked_kappa([1, 2, 4], 2, 0, low=1 / 16), [1 / 16, 1 / 8, 1 / 4])  # the slider's end
+    np.testing.assert_allclose(linked_kappa([0, 2, 4], 0, 1), [1, 2, 4])  # from black R moves alone
     with pytest.raises(InputError, match="channel must be 0, 1 or 2"):
         linked_kappa([1, 1, 1], 3, 1)
     doc = acquired_doc
     editor, wall = _editor(doc, albedo=[0.1, 0.4, 0.1])
-    editor.set_channel(wall, 0, 2.0, linked=True)
-    np.testing.assert_allclose(doc.target(wall).kappa, [2, 2, 2])
-    editor.set_channel(wall, 0, 8.0, linked=True)  # G would reach albedo 1.6: all stop where G reaches 1
-    k = doc.target(wall).kappa
-    assert k[0] == pytest.approx(k[1]) == pytest.approx(k[2]) and 0.4 * k[1] < 1 and 0.4 * k[1] > 0.999
-    editor.set_channel(wall, 2, 0.0, linked=False)  # 0 is black, allowed
+    _low, high = editor.kappa_range(wall)
+    editor.set_kappa(wall, linked_kappa(doc.target(wall).kappa, 0, 8.0, high=high * (1 - 1e-9)))
+    k = doc.target(wall).kappa  # G would reach albedo 3.2: all stop where G reaches 1
+    assert k[0] == pytest.approx(k[1]) == pytest.approx(k[2]) and 0.999 < 0.4 * k[1] < 1
+    editor.set_kappa(wall, linked_kappa(k, 2, 0.0, linked=False))  # 0 is black, allowed
     assert doc.target(wall).kappa[2] == 0
 
 
