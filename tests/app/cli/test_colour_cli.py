@@ -166,7 +166,7 @@ def test_the_app_model_sees_the_sessions_colours(scene, measured):
     assert warnings == []
     editor = ColourEditor(doc, session_colours(doc, session))
     panel, wall = doc.by_name("panel"), doc.by_name("right_wall")
-    assert editor.albedo_text(panel.uid).startswith("albedo (")
+    assert editor.albedo_text(panel.uid).startswith("Absolute albedo ")
     np.testing.assert_allclose(editor.colour(panel.uid).albedo, truth["panel"], rtol=0.02)
     assert editor.colours[wall.uid].direct is not None and editor.colours[wall.uid].albedo is not None
     editor.request_albedo(panel.uid, [0.3, 0.3, 0.3])
