@@ -420,19 +420,19 @@ def kappa_limit(decomposition: Decomposition) -> np.ndarray:
     ``Σ κ^{i+1} R^i L_d`` (Eq. 3) is a power series in κR; it converges while κλ < 1. The
     measured components cannot tell λ directly: a decomposition of order K is a truncated fit,
     whose last component absorbs every interaction beyond it (on the ideal Cornell wall the
-    ratio of its last two components puts the green limit at 2.2 at order 4 and 1.1 at order
-    5, against 5.9). The observations carry the whole series instead: summed over the target,
+    ratio of its last two components puts the green limit at 1.5 at order 4, against 5.4).
+    The observations carry the whole series instead: summed over the target,
     ``obs[r] = Σ_n binom(n + r, r) S_n`` (Eq. 6), and for interactions falling as modes
     ``S_n = Σ_j a_j λ_j^n`` that is ``Σ_j a_j μ_j^{r+1}`` with ``μ_j = 1 / (1 − λ_j)``. So the
     observation sums (rebuilt from the components through Eq. 6) are fitted with two modes
     (Prony's method on the last four, K ≥ 4), the slowest giving λ; with fewer observations,
     or when the fit has no real mode above the last observations' growth (noise), that growth
     itself gives λ — an underestimate, as the ratios of successive observations rise towards
-    ``μ_max``. On the ideal virtual rig at order ≥ 4 this is 3–13 % above the true limit
-    (Cornell wall, wedge, three-area scene); on the realistic rig (16 frames) the Cornell
-    wall's green is 6.7 for 5.9, but channels that interreflect little (limits of 40–56) come
-    out at 5–9: their observations grow faster than the ideal rig's (errors of the re-emitted
-    light, not isolated). Physics stops earlier anyway: a surface's albedo stays below 1, so
+    ``μ_max``. On the ideal virtual rig at order ≥ 4 the Cornell wall's limits come out 1–2 %
+    above the truth (`bench/albedo.py`, 96²); on the realistic rig (16 frames) its green is
+    6.7 for 5.4, but channels that interreflect little (limits of 37–49) come out near 5:
+    their observations grow faster than the ideal rig's (errors of the re-emitted light, not
+    isolated). Physics stops earlier anyway: a surface's albedo stays below 1, so
     ``1 / albedo`` (:func:`kappa_ceiling`, with a reference) is the tighter bound.
 
     Examples
