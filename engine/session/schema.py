@@ -74,7 +74,7 @@ _SETTINGS = Obj(required={
     "differences": Bool(),
     "tau": Num(0, 1, positive=True),
     "negative": Str(choices=("clamp", "split")),
-})
+}, optional={"complete_direct": Bool()})
 
 _ADAPTIVE = Obj(required={
     "policy": Str(choices=("brute", "linear", "span")),
