@@ -9,6 +9,11 @@ ground-truth PNG and a false-colour error image. ``--rig mitsuba:cornell`` runs 
 path-traced rig (Mitsuba 3; 64² by default, ``--spp`` samples per pixel per capture, one frame
 per capture).
 
+Where the rig's pixels mix surfaces (the realistic rig's supersampled pixels, the path tracer's),
+the target is painted as an artist would: the scene's mask with its edge refined from a
+photograph (:func:`app.model.demo.refined_target`), so only pixels wholly on the wall are
+re-emitted and its edge pixels are recolored from both sides (``--edge``).
+
 The headline on stdout compares like with like: the relative error of our recolor and of a
 naive per-pixel recolor over the surfaces (the lamp in view dominates the image's norm and
 every method reproduces it). Noise reduction is sized from the measured components' noise
