@@ -346,8 +346,7 @@ class Document:
         return t.edge_pixels()
 
     def _apply_stroke(self, uid: int, bbox: BBox, after: tuple[np.ndarray, ...], verb: str) -> None:
-        """Write ``after`` (one region per :func:`~app.model.commands.layers`): into the open stroke, else as
-        one undo step."""
+        """Write ``after`` (a region per :func:`~app.model.commands.layers`) into the stroke, else as an undo step."""
         t = self.target(uid)
         y0, y1, x0, x1 = bbox
         if self._stroke is None or self._stroke.uid != uid:

@@ -239,8 +239,7 @@ class RigControl(QObject):
             self._on_document_changed()
 
     def _on_mask(self, uid: int, _bbox) -> None:
-        """The dock follows masks as they are painted; a target whose edge became soft (or hard) hands it a new
-        array."""
+        """The dock follows masks as painted; a target whose edge turned soft (or hard) hands it its new array."""
         panel = self.panel
         if panel is None or panel.busy or self.w.doc is None:
             return

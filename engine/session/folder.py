@@ -566,8 +566,7 @@ class Session:
                 inside(self._root, self.path, old["file"], f"mask {name!r}").unlink(missing_ok=True)
 
     def read_mask(self, name: str) -> np.ndarray:
-        """Read mask ``name``: ``(H, W) bool``, or float32 coverage for a soft mask; SessionError if unknown,
-        missing or corrupt."""
+        """Read mask ``name``: ``(H, W) bool`` (float32 coverage if soft); SessionError if missing or corrupt."""
         with self._lock:
             entry = self._manifest["masks"].get(name)
         if entry is None:
