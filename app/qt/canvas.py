@@ -315,7 +315,8 @@ class Canvas(QWidget):
             r = self.painter.size * self.zoom / 2
             p.setBrush(Qt.BrushStyle.NoBrush)
             for colour, width in ((QColor(0, 0, 0, 180), 3), (QColor(255, 255, 255), 1)):
-                p.setPen(QPen(colour, width, Qt.PenStyle.DashLine if self.painter.tool == Tool.ERASER else Qt.PenStyle.SolidLine))
+                style = Qt.PenStyle.DashLine if self.painter.tool == Tool.ERASER else Qt.PenStyle.SolidLine
+                p.setPen(QPen(colour, width, style))
                 p.drawEllipse(self._mouse, r, r)
 
     def _draw_banner(self, p: QPainter, text: str) -> None:
