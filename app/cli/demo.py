@@ -9,6 +9,11 @@ ground-truth PNG and a false-colour error image. ``--rig mitsuba:cornell`` runs 
 path-traced rig (Mitsuba 3; 64² by default, ``--spp`` samples per pixel per capture, one frame
 per capture).
 
+Where the rig's pixels mix surfaces (the realistic rig's supersampled pixels, the path tracer's),
+the target is painted as an artist would: the scene's mask with its edge refined from a
+photograph (:func:`app.model.demo.refined_target`), so only pixels wholly on the wall are
+re-emitted and its edge pixels are recolored from both sides (``--edge``).
+
 The headline on stdout compares like with like: the relative error of our recolor and of a
 naive per-pixel recolor over the surfaces (the lamp in view dominates the image's norm and
 every method reproduces it). Noise reduction is sized from the measured components' noise
@@ -26,7 +31,7 @@ import numpy as np
 
 from app.cli._args import frames, kappa, order, radius, resolution
 from app.cli.main import ProgressBar
-from app.model.demo import DEMO_KAPPA, DEMO_OPTIONS, DEMO_ORDER, DEMO_TARGET
+from app.model.demo import DEMO_KAPPA, DEMO_OPTIONS, DEMO_ORDER, DEMO_TARGET, refined_target
 from app.model.files import export_image, open_document
 from app.model.noise import SKIP_BELOW, denoise_radius
 from engine.acquire import Adaptive
@@ -79,6 +84,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--denoise", type=_denoise, default="auto", metavar="auto|RADIUS",
                         help="noise reduction: 'auto' (default) sizes the guided filter from the measured noise and "
                              "skips it on noise-free data; a radius in pixels; 0 = off")
+    parser.add_argument("--edge", choices=("auto", "refine", "hard"), default="auto",
+                        help="the target's edge: 'refine' refines the scene's mask from a photograph into coverage "
+                             "(edge pixels recolored from both sides, only wholly covered pixels re-emitted); 'hard' "
+                             "acquires the binary mask as painted; 'auto' (default): refine where pixels mix surfaces "
+                             "(the realistic and the path-traced rigs), hard on the ideal rig (one point per pixel)")
     parser.add_argument("--fresh", action="store_true", help="delete the output folder's session first")
 
 
@@ -130,8 +140,10 @@ def run(args) -> int:
         run_calibration(rig, session, progress=ProgressBar())
         print(f"capturing target {args.target!r} at order {args.order}, {frames} frame(s) per capture ...",
               file=sys.stderr)
+        refine = args.edge == "refine" or (args.edge == "auto" and (path_traced or not args.ideal))
+        painted = refined_target(rig, session, mask, frames=frames) if refine else mask
         result = run_capture(
-            rig, session, [(args.target, mask)], args.order,
+            rig, session, [(args.target, painted)], args.order,
             adaptive=None if args.adaptive == "brute" else Adaptive(args.adaptive),
             frames=frames,
             progress=ProgressBar(),

@@ -17,39 +17,58 @@ if TYPE_CHECKING:
     from app.model.target import BBox, Measurement, Target
 
 
+def layers(target: Target) -> tuple[np.ndarray, ...]:
+    """The arrays a mask edit changes: the binary mask, and the coverage once the edge is soft."""
+    return (target.mask,) if target.coverage is None else (target.mask, target.coverage)
+
+
 class Stroke:
     """Bounding box and old values of everything one drag touched (napari's paint atom)."""
 
     def __init__(self, uid: int):
         self.uid = uid
         self.bbox: BBox | None = None
-        self.before: np.ndarray | None = None
+        self.before: tuple[np.ndarray, ...] | None = None
 
-    def remember(self, mask: np.ndarray, bbox: BBox) -> None:
-        """Grow the saved region to cover ``bbox`` before ``mask[bbox]`` is modified."""
+    def remember(self, arrays: tuple[np.ndarray, ...], bbox: BBox) -> None:
+        """Grow the saved region to cover ``bbox`` before ``arrays[bbox]`` are modified."""
         if self.bbox is None:
             y0, y1, x0, x1 = bbox
-            self.bbox, self.before = bbox, mask[y0:y1, x0:x1].copy()
+            self.bbox, self.before = bbox, tuple(a[y0:y1, x0:x1].copy() for a in arrays)
             return
         (a0, a1, b0, b1), (c0, c1, d0, d1) = self.bbox, bbox
         new = (min(a0, c0), max(a1, c1), min(b0, d0), max(b1, d1))
         if new == self.bbox:
             return
         y0, y1, x0, x1 = new
-        # Outside the old box nothing was touched yet, so the mask still holds the old values.
-        before = mask[y0:y1, x0:x1].copy()
-        before[a0 - y0 : a1 - y0, b0 - x0 : b1 - x0] = self.before
-        self.bbox, self.before = new, before
+        # Outside the old box nothing was touched yet, so the arrays still hold the old values.
+        grown = []
+        for array, old in zip(arrays, self.before, strict=True):
+            before = array[y0:y1, x0:x1].copy()
+            before[a0 - y0 : a1 - y0, b0 - x0 : b1 - x0] = old
+            grown.append(before)
+        self.bbox, self.before = new, tuple(grown)
 
 
 class MaskEdit:
+    """Replace a region of a target's mask (and of its coverage, once the edge is soft).
+
+    ``before`` and ``after`` hold the region of each of :func:`layers` at the time of the
+    edit: a bare array is the binary mask. An edit recorded before the edge became soft sets
+    the coverage of its region to the binary values it restores.
+    """
+
     def __init__(self, doc: Document, uid: int, bbox: BBox, before, after, verb: str):
-        self.doc, self.uid, self.bbox, self.before, self.after = doc, uid, bbox, before, after
+        self.doc, self.uid, self.bbox = doc, uid, bbox
+        self.before, self.after = _as_layers(before), _as_layers(after)
         self.text = f"{verb} {doc.target(uid).name!r}"
 
-    def _set(self, values) -> None:
+    def _set(self, values: tuple[np.ndarray, ...]) -> None:
         y0, y1, x0, x1 = self.bbox
-        self.doc.target(self.uid).mask[y0:y1, x0:x1] = values
+        t = self.doc.target(self.uid)
+        t.mask[y0:y1, x0:x1] = values[0]
+        if t.coverage is not None:
+            t.coverage[y0:y1, x0:x1] = values[1] if len(values) > 1 else values[0]
         self.doc.events.mask.emit(self.uid, self.bbox)
 
     def redo(self) -> None:
@@ -57,6 +76,10 @@ class MaskEdit:
 
     def undo(self) -> None:
         self._set(self.before)
+
+
+def _as_layers(values) -> tuple[np.ndarray, ...]:
+    return tuple(values) if isinstance(values, tuple) else (values,)
 
 
 class Invert:
@@ -67,6 +90,8 @@ class Invert:
     def redo(self) -> None:
         t = self.doc.target(self.uid)
         np.logical_not(t.mask, out=t.mask)
+        if t.coverage is not None:
+            np.subtract(np.float32(1), t.coverage, out=t.coverage)
         self.doc.events.mask.emit(self.uid, (0, self.doc.shape[0], 0, self.doc.shape[1]))
 
     undo = redo

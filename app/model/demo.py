@@ -212,6 +212,27 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         raise
 
 
+#: The capture the demo refines its target's edge from (a photograph: projector at black).
+EDGE_PHOTOGRAPH = "edge-photograph"
+
+
+def refined_target(rig, session, mask: np.ndarray, *, frames: int = 1, progress=None) -> np.ndarray:
+    """The demo's target as an artist paints it: the scene's mask, its edge refined from a photograph.
+
+    Takes (or reuses) the session's :data:`EDGE_PHOTOGRAPH` and returns
+    :func:`engine.edge.refine_mask` of ``mask`` on it: float coverage, 1 inside, the fraction
+    of the target on edge pixels (pixels mixing the target and its neighbour, as every real
+    camera and the supersampled realistic rig have). Acquisition re-emits only its solid pixels
+    and recolors edge pixels from both sides (:mod:`engine.edge`).
+    """
+    from engine.acquire import Recorder
+    from engine.edge import refine_mask
+
+    recorder = Recorder(rig, session, progress=progress, frames=frames)
+    photo = recorder.capture(EDGE_PHOTOGRAPH, recorder.black(), meta={"kind": "edge"})
+    return refine_mask(np.asarray(mask, bool), photo)
+
+
 def _finish(doc: Document) -> None:
     if doc.targets:
         doc.set_current(doc.targets[-1].uid)

@@ -21,6 +21,7 @@ from app.model import commands as cmd
 from app.model.history import History
 from app.model.target import KAPPA_MAX, KAPPA_MIN, PALETTE, BBox, DocumentEvents, Measurement, Target
 from engine.checks import check_float_image, check_kappa, check_mask
+from engine.edge import check_coverage, refine_mask
 from engine.errors import InputError
 from engine.workflow import check_targets
 
@@ -150,16 +151,23 @@ class Document:
             The cascade to acquire, first to last; default the included targets in order.
         """
         uids = [t.uid for t in self.acquisition_targets()] if uids is None else list(uids)
-        check_targets([(self.target(u).name, self.target(u).mask) for u in uids], self.shape,
+        check_targets([(self.target(u).name, self.target(u).acquired_mask()) for u in uids], self.shape,
                       unreachable=self.unreachable)
 
     # ----------------------------------------------------------------- target list
     def add_target(self, name: str | None = None, mask=None, *, kappa=1.0, index: int | None = None) -> Target:
-        """Add a target (undoable) and make it current. Returns it."""
+        """Add a target (undoable) and make it current. Returns it.
+
+        ``mask`` is ``(H, W)`` bool, or float coverage in [0, 1] (a soft edge, :mod:`engine.edge`).
+        """
         name = self._unique_name(name or f"target {len(self.targets) + 1}")
+        coverage = None
+        if mask is not None and np.asarray(mask).dtype.kind == "f":
+            coverage = check_coverage("mask", mask, self.shape).copy()
+            mask = coverage >= 0.5
         mask = np.zeros(self.shape, bool) if mask is None else check_mask("mask", mask, self.shape).copy()
         colour = self._free_colour()
-        t = Target(self._next_uid, name, mask, check_kappa(kappa, 3), colour)
+        t = Target(self._next_uid, name, mask, check_kappa(kappa, 3), colour, coverage=coverage)
         self._next_uid += 1
         index = len(self.targets) if index is None else int(index)
         self.history.push(cmd.AddTarget(self, t, index))
@@ -245,11 +253,18 @@ class Document:
         self.set_kappa(uid, 1.0)
 
     # ----------------------------------------------------------------- masks
-    def begin_stroke(self, uid: int) -> None:
-        """A drag starts painting ``uid``; :meth:`paint` calls accumulate into one undo step."""
+    def begin_stroke(self, uid: int, *, soft: bool = False) -> None:
+        """A drag starts painting ``uid``; :meth:`paint` calls accumulate into one undo step.
+
+        ``soft``: the stroke paints coverage (:meth:`paint_soft`), so the target's edge
+        becomes soft first (its coverage starts as the binary mask: nothing visible changes).
+        """
         if lock := self.mask_lock(uid):
             raise InputError(lock)
         self.end_stroke()
+        t = self.target(uid)
+        if soft and t.coverage is None:
+            t.coverage = t.mask.astype(np.float32)
         self._stroke = cmd.Stroke(uid)
 
     def paint(self, uid: int, bbox: BBox, stamp: np.ndarray, value: bool) -> int:
@@ -268,21 +283,82 @@ class Document:
         t = self.target(uid)
         region = t.mask[y0:y1, x0:x1]
         change = stamp & (region != value)
+        if t.coverage is not None:  # a soft edge: partly covered pixels change too
+            change = stamp & (t.coverage[y0:y1, x0:x1] != np.float32(value))
         n = int(np.count_nonzero(change))
         if n == 0:
             return 0
+        after = tuple(a[y0:y1, x0:x1].copy() for a in cmd.layers(t))
+        for a in after:
+            a[change] = value
+        self._apply_stroke(uid, bbox, after, "Paint")
+        self._warn_unreachable(t, bbox, change, value)
+        return n
+
+    def paint_soft(self, uid: int, bbox: BBox, weight: np.ndarray, add: bool) -> int:
+        """Paint coverage: ``max(coverage, weight)`` (add) or ``min(coverage, 1 − weight)`` (erase).
+
+        A feathered brush's stamp (``weight`` in [0, 1], the bbox's shape) makes the edge soft;
+        the binary mask follows (``coverage >= 0.5``). One undo step inside a stroke, as :meth:`paint`.
+        Returns the number of pixels whose coverage changed.
+        """
+        bbox = self._clip_bbox(bbox)
+        if bbox is None:
+            return 0
+        y0, y1, x0, x1 = bbox
+        weight = np.clip(np.asarray(weight, np.float32), 0, 1)
+        if weight.shape != (y1 - y0, x1 - x0):
+            raise InputError(f"weight must have the bbox's shape {(y1 - y0, x1 - x0)}, got {weight.shape}")
+        t = self.target(uid)
+        if t.coverage is None:
+            if lock := self.mask_lock(uid):
+                raise InputError(lock)
+            t.coverage = t.mask.astype(np.float32)
+        old = t.coverage[y0:y1, x0:x1]
+        new = np.maximum(old, weight) if add else np.minimum(old, 1 - weight)
+        change = new != old
+        n = int(np.count_nonzero(change))
+        if n == 0:
+            return 0
+        mask = t.mask[y0:y1, x0:x1]
+        self._apply_stroke(uid, bbox, (new >= 0.5, new), "Paint")
+        self._warn_unreachable(t, bbox, (new >= 0.5) & ~mask, True)
+        return n
+
+    def refine_edge(self, uid: int) -> int:
+        """Refine the target's edge from the photograph (:func:`engine.edge.refine_mask`), one undo step.
+
+        Pixels on the binary mask's boundary get the fraction of them on the target; returns
+        how many pixels are partly target afterwards.
+        """
+        if lock := self.mask_lock(uid):
+            raise InputError(lock)
+        t = self.target(uid)
+        if not t.mask.any():
+            raise InputError(f"{t.name!r} is empty: paint it before refining its edge")
+        coverage = refine_mask(t.mask, self.photograph)
+        bbox = (0, self.shape[0], 0, self.shape[1])
+        if t.coverage is None:
+            t.coverage = t.mask.astype(np.float32)
+        before = tuple(a.copy() for a in cmd.layers(t))
+        if not np.array_equal(before[1], coverage):
+            self.history.push(cmd.MaskEdit(self, uid, bbox, before, (coverage >= 0.5, coverage), "Refine edge"))
+        return t.edge_pixels()
+
+    def _apply_stroke(self, uid: int, bbox: BBox, after: tuple[np.ndarray, ...], verb: str) -> None:
+        """Write ``after`` (a region per :func:`~app.model.commands.layers`) into the stroke, else as an undo step."""
+        t = self.target(uid)
+        y0, y1, x0, x1 = bbox
         if self._stroke is None or self._stroke.uid != uid:
             if lock := self.mask_lock(uid):
                 raise InputError(lock)
-            after = region.copy()
-            after[change] = value
-            self.history.push(cmd.MaskEdit(self, uid, bbox, region.copy(), after, "Paint"))
-        else:
-            self._stroke.remember(t.mask, bbox)
-            region[change] = value
-            self.events.mask.emit(uid, bbox)
-        self._warn_unreachable(t, bbox, change, value)
-        return n
+            before = tuple(a[y0:y1, x0:x1].copy() for a in cmd.layers(t))
+            self.history.push(cmd.MaskEdit(self, uid, bbox, before, after, verb))
+            return
+        self._stroke.remember(cmd.layers(t), bbox)
+        for array, values in zip(cmd.layers(t), after, strict=True):
+            array[y0:y1, x0:x1] = values
+        self.events.mask.emit(uid, bbox)
 
     def end_stroke(self) -> None:
         """Close the stroke: one undo step with its bounding box and old values."""
@@ -290,25 +366,37 @@ class Document:
         if stroke is None or stroke.bbox is None or not self._has(stroke.uid):
             return
         y0, y1, x0, x1 = stroke.bbox
-        after = self.target(stroke.uid).mask[y0:y1, x0:x1].copy()
-        if np.array_equal(after, stroke.before):
+        after = tuple(a[y0:y1, x0:x1].copy() for a in cmd.layers(self.target(stroke.uid)))
+        if all(np.array_equal(a, b) for a, b in zip(after, stroke.before, strict=True)):
             return
         self.history.push(cmd.MaskEdit(self, stroke.uid, stroke.bbox, stroke.before, after, "Paint"), applied=True)
 
     def set_mask_region(self, uid: int, bbox: BBox, values: np.ndarray, text: str = "Edit mask") -> None:
-        """Replace ``mask[bbox]`` with ``values`` as one undo step (polygon, fill, clear)."""
+        """Replace ``mask[bbox]`` with ``values`` as one undo step (polygon, fill, clear).
+
+        Boolean ``values`` are binary (a soft edge's coverage there becomes 0/1); float values
+        are coverage in [0, 1] (the edge becomes soft, the mask is ``values >= 0.5``).
+        """
         if lock := self.mask_lock(uid):
             raise InputError(lock)
         y0, y1, x0, x1 = bbox
         t = self.target(uid)
-        before = t.mask[y0:y1, x0:x1].copy()
-        values = np.asarray(values, bool)
-        if values.shape != before.shape:
-            raise InputError(f"values must have the bbox's shape {before.shape}, got {values.shape}")
-        if np.array_equal(before, values):
+        if np.asarray(values).dtype.kind == "f" and t.coverage is None:
+            t.coverage = t.mask.astype(np.float32)  # the same mask: nothing visible changes
+        before = tuple(a[y0:y1, x0:x1].copy() for a in cmd.layers(t))
+        if np.asarray(values).dtype.kind == "f":
+            coverage = np.clip(np.asarray(values, np.float32), 0, 1)
+            values = coverage >= 0.5
+        else:
+            values = np.asarray(values, bool)
+            coverage = values.astype(np.float32)
+        if values.shape != before[0].shape:
+            raise InputError(f"values must have the bbox's shape {before[0].shape}, got {values.shape}")
+        after = (values.copy(),) + ((coverage,) if t.coverage is not None else ())
+        if all(np.array_equal(a, b) for a, b in zip(after, before, strict=True)):
             return
-        self.history.push(cmd.MaskEdit(self, uid, bbox, before, values.copy(), text))
-        self._warn_unreachable(t, bbox, values & ~before, True)
+        self.history.push(cmd.MaskEdit(self, uid, bbox, before, after, text))
+        self._warn_unreachable(t, bbox, values & ~before[0], True)
 
     def clear_mask(self, uid: int) -> None:
         """Empty the mask (one undo step storing only the painted bounding box)."""

@@ -210,8 +210,9 @@ def document_edit(document: Document, *, photograph: str | None = None) -> Edit:
     """
     acq = document.acquisition
     return Edit(
-        targets=tuple(EditTarget(t.name, mask_name(t.name, mask_digest(t.mask)), tuple(float(k) for k in t.kappa),
-                                 tuple(int(c) for c in t.colour)) for t in document.targets),
+        targets=tuple(EditTarget(t.name, mask_name(t.name, mask_digest(t.acquired_mask())),
+                                 tuple(float(k) for k in t.kappa), tuple(int(c) for c in t.colour))
+                      for t in document.targets),
         acquisition=None if acq is None else EditAcquisition(
             tuple(document.target(u).name for u in acq.cascade),
             tuple(tuple(float(k) for k in kap) for kap in acq.kappas),
@@ -243,7 +244,7 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
     existing = set(session.masks)
     for t, saved in zip(document.targets, edit.targets, strict=True):
         if saved.mask not in existing:
-            session.write_mask(saved.mask, t.mask)
+            session.write_mask(saved.mask, t.acquired_mask())
             existing.add(saved.mask)
     acq = document.acquisition
     present = set(session.cache_keys())

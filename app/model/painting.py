@@ -120,6 +120,55 @@ def capsule(p0: tuple[float, float], p1: tuple[float, float], radius: float, sha
     return (y0, y1, x0, x1), stamp
 
 
+def feathered_capsule(p0: tuple[float, float], p1: tuple[float, float], radius: float, hardness: float,
+                      shape: tuple[int, int]):
+    """A feathered brush's stamp along the segment p0–p1: coverage 1 near it, falling to 0 at ``radius``.
+
+    Parameters
+    ----------
+    p0, p1 : (x, y) float
+        Segment end points in image coordinates.
+    radius : float
+        Brush radius in pixels (half the brush size).
+    hardness : float in [0, 1)
+        The fraction of the radius painted fully; coverage falls linearly from there to 0 at
+        ``radius`` (the feather). 1 is the hard brush of :func:`capsule`.
+    shape : (H, W)
+
+    Returns
+    -------
+    bbox : (y0, y1, x0, x1) or None
+        Bounding box of the stamp inside the image (None if it misses the image).
+    weight : (y1 - y0, x1 - x0) float32
+        Coverage the stamp paints, by the distance of each pixel centre to the segment.
+
+    Examples
+    --------
+    >>> bbox, w = feathered_capsule((2.5, 2.5), (2.5, 2.5), 2.0, 0.5, (5, 5))
+    >>> w[2].tolist()
+    [0.0, 1.0, 1.0, 1.0, 0.0]
+    >>> float(w[1, 1])  # distance √2 from the centre: (2 − √2) / (2 − 1)
+    0.5857864...
+    """
+    (ax, ay), (bx, by) = p0, p1
+    h, w = shape
+    y0 = max(int(np.floor(min(ay, by) - radius)), 0)
+    y1 = min(int(np.floor(max(ay, by) + radius)) + 1, h)
+    x0 = max(int(np.floor(min(ax, bx) - radius)), 0)
+    x1 = min(int(np.floor(max(ax, bx) + radius)) + 1, w)
+    if y0 >= y1 or x0 >= x1:
+        return None, None
+    yy = (np.arange(y0, y1, dtype=np.float64) + 0.5)[:, None]
+    xx = (np.arange(x0, x1, dtype=np.float64) + 0.5)[None, :]
+    dx, dy = bx - ax, by - ay
+    seg2 = dx * dx + dy * dy
+    t = np.clip(((xx - ax) * dx + (yy - ay) * dy) / seg2, 0.0, 1.0) if seg2 > 0 else np.zeros((1, 1))
+    dist = np.hypot(xx - (ax + t * dx), yy - (ay + t * dy))
+    inner = hardness * radius
+    weight = np.clip((radius - dist) / max(radius - inner, 1e-9), 0.0, 1.0)
+    return (y0, y1, x0, x1), weight.astype(np.float32)
+
+
 def polygon_mask(points, shape: tuple[int, int]):
     """Rasterise a closed polygon (x, y vertices in image coordinates) to its bbox and stamp.
 
@@ -200,6 +249,9 @@ class Painter:
     tool : Tool
     size : float
         Brush diameter in camera pixels.
+    hardness : float
+        Fraction of the brush radius painted fully (1: a hard brush, binary mask; less: a
+        feathered brush whose edge paints partial coverage, :func:`feathered_capsule`).
     tolerance : float
         Fill tolerance in log radiance.
     polygon : list of (x, y)
@@ -213,6 +265,7 @@ class Painter:
         self.image = document.photograph if image is None else image
         self.tool = Tool.BRUSH
         self.size = 20.0
+        self.hardness = 1.0
         self.tolerance = 0.1
         self.polygon: list[tuple[float, float]] = []
         self._last: tuple[float, float] | None = None
@@ -228,6 +281,10 @@ class Painter:
     def set_size(self, size: float) -> None:
         """Brush diameter, clamped to MIN_SIZE..MAX_SIZE (a UI setting, not data)."""
         self.size = float(min(max(size, self.MIN_SIZE), self.MAX_SIZE))
+
+    def set_hardness(self, hardness: float) -> None:
+        """Brush hardness, clamped to 0..1 (a UI setting, not data)."""
+        self.hardness = float(min(max(hardness, 0.0), 1.0))
 
     def grow(self) -> None:
         """``]``: brush 25 % larger (at least one pixel)."""
@@ -291,7 +348,7 @@ class Painter:
     def _brush(self, uid: int, e: MouseEvent) -> bool:
         if e.type == EventType.PRESS:
             self._erasing = self.tool == Tool.ERASER or e.subtract
-            self.doc.begin_stroke(uid)
+            self.doc.begin_stroke(uid, soft=self.hardness < 1)
             self._last = (e.x, e.y)
             self._stamp(uid, (e.x, e.y), (e.x, e.y))
             return True
@@ -309,6 +366,11 @@ class Painter:
         return False
 
     def _stamp(self, uid: int, p0, p1) -> None:
+        if self.hardness < 1:
+            bbox, weight = feathered_capsule(p0, p1, self.size / 2.0, self.hardness, self.doc.shape)
+            if bbox is not None:
+                self.doc.paint_soft(uid, bbox, weight, not self._erasing)
+            return
         bbox, stamp = capsule(p0, p1, self.size / 2.0, self.doc.shape)
         if bbox is not None:
             self.doc.paint(uid, bbox, stamp, not self._erasing)
@@ -362,8 +424,12 @@ class Painter:
             bbox = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
             region = region[bbox[0] : bbox[1], bbox[2] : bbox[3]]
         y0, y1, x0, x1 = bbox
-        old = self.doc.target(uid).mask[y0:y1, x0:x1]
-        new = old & ~region if subtract else old | region
+        t = self.doc.target(uid)
+        if t.coverage is not None:  # a soft edge keeps its coverage outside the region
+            new = np.where(region, np.float32(0 if subtract else 1), t.coverage[y0:y1, x0:x1])
+        else:
+            old = t.mask[y0:y1, x0:x1]
+            new = old & ~region if subtract else old | region
         self.doc.set_mask_region(uid, bbox, new, text)
 
 

@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 from psygnal import Signal, SignalGroup
 
+from engine.edge import edge, is_soft
+
 #: Slider range of κ (log scale), as in the issue: 1/16 … 16.
 KAPPA_MIN = 1.0 / 16.0
 KAPPA_MAX = 16.0
@@ -33,7 +35,7 @@ BBox = tuple[int, int, int, int]  # (y0, y1, x0, x1), half-open, camera pixels
 
 @dataclass
 class Target:
-    """One target: a binary mask in camera pixels and its albedo scale.
+    """One target: a mask in camera pixels (binary, or soft along its edge) and its albedo scale.
 
     Attributes
     ----------
@@ -42,13 +44,17 @@ class Target:
     name : str
         Display name: any non-empty text (files store masks under names of their own).
     mask : (H, W) bool
-        Owned by the document; edit it only through :class:`Document`.
+        Owned by the document; edit it only through :class:`Document`. With a soft edge it is
+        the pixels at least half on the target (``coverage >= 0.5``).
     kappa : (3,) float64
         Per-channel albedo scale κ.
     colour : (3,) int
         Overlay colour, RGB 0..255.
     included : bool
         Whether the next acquisition measures it (its place in the cascade is its place in the list).
+    coverage : (H, W) float32 or None
+        The fraction of each pixel on the target (:mod:`engine.edge`), once a feathered brush
+        or Refine Edge made the edge soft; None while the mask is binary. Owned by the document.
     """
 
     uid: int
@@ -57,6 +63,20 @@ class Target:
     kappa: np.ndarray = field(default_factory=lambda: np.ones(3))
     colour: tuple[int, int, int] = PALETTE[0]
     included: bool = True
+    coverage: np.ndarray | None = None
+
+    def acquired_mask(self) -> np.ndarray:
+        """What acquisition measures: the soft mask when some pixel is partly target, else the binary mask.
+
+        The target's own array, not a copy (read it, never write it).
+        """
+        if self.coverage is not None and is_soft(self.coverage):
+            return self.coverage
+        return self.mask
+
+    def edge_pixels(self) -> int:
+        """Pixels partly on the target (0 < coverage < 1)."""
+        return 0 if self.coverage is None else int(np.count_nonzero(edge(self.coverage)))
 
 
 @dataclass(frozen=True)

@@ -233,12 +233,14 @@ class AcquisitionPanel(QWidget):
     def set_targets(self, targets, fixed_kappa=()) -> None:
         """Targets in cascade order as (name, mask), and the fixed κ of all but the last.
 
+        A mask is ``(H, W)`` bool, or float coverage for a target with a soft edge.
+
         The masks are not copied (the panel follows a document's targets as they are painted);
         a run captures them as they are when it starts, and editing is locked while it runs.
         """
         if self.busy:
             raise InputError("cannot change the targets while an acquisition runs")
-        self.targets = [(str(n), np.asarray(m, bool)) for n, m in targets]
+        self.targets = [(str(n), m if np.asarray(m).dtype.kind == "f" else np.asarray(m, bool)) for n, m in targets]
         if self._error_shown:  # a refusal was about the targets as they were
             self._note("")
         self.fixed_kappa = [np.broadcast_to(np.asarray(k, float), (3,)).copy() for k in fixed_kappa]

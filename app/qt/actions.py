@@ -85,6 +85,9 @@ ACTIONS: tuple[ActionSpec, ...] = (
                "editable_target"),
     ActionSpec("invert_mask", "&Invert Mask", "on_invert_mask", "Ctrl+I", "Invert the selected target's mask",
                "editable_target"),
+    ActionSpec("refine_edge", "&Refine Edge", "on_refine_edge", "Ctrl+R",
+               "Give the selected target's edge pixels the fraction of them on the target, from the photograph",
+               "editable_target"),
     ActionSpec("overlays", "Show &Overlays", "on_overlays", "O", "Target outlines and unreachable-pixel hatching",
                "document", checkable=True, checked=True),
     ActionSpec("brush_larger", "Larger Brush", "on_brush_larger", "]", "Brush diameter × 1.25", "document"),
@@ -120,7 +123,7 @@ MENUS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("menu_file", "&File", ("open", "open_image", "demo", "@recent", "-", "save", "save_as", "export", "-", "quit")),
     ("menu_edit", "&Edit", ("undo", "redo")),
     ("menu_targets", "&Targets", ("add_target", "delete_target", "-", "@tools", "-", "brush_larger", "brush_smaller",
-                                  "clear_mask", "invert_mask", "overlays")),
+                                  "clear_mask", "invert_mask", "refine_edge", "overlays")),
     ("menu_view", "&View", ("@views", "-", "fit", "zoom_100", "zoom_in", "zoom_out")),
     ("menu_rig", "&Rig", ("calibrate", "acquire", "discard", "-", "reopen_rig", "close_rig")),
     ("menu_help", "&Help", ("about",)),
@@ -128,7 +131,8 @@ MENUS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
 
 #: Toolbars: (objectName, title, entries); "#name" entries are the window's widgets.
 TOOLBARS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
-    ("tools", "Tools", ("@tools", "-", "#brush_size", "#fill_tolerance", "-", "clear_mask", "invert_mask")),
+    ("tools", "Tools", ("@tools", "-", "#brush_size", "#brush_hardness", "#fill_tolerance", "-", "clear_mask",
+                        "invert_mask", "refine_edge")),
     ("view", "View", ("@views", "-", "#display_exposure", "fit", "zoom_100")),
 )
 
@@ -262,6 +266,14 @@ def _install_toolbars(window) -> None:
     window.size_spin.setSuffix(" px")
     window.size_spin.setToolTip("Brush diameter in camera pixels ([ and ] change it)")
     window.size_spin.valueChanged.connect(lambda v: window.painter and window.painter.set_size(v))
+    window.hardness_spin = QSpinBox(objectName="brush_hardness")
+    window.hardness_spin.setRange(0, 100)
+    window.hardness_spin.setValue(100)
+    window.hardness_spin.setPrefix("Hardness ")
+    window.hardness_spin.setSuffix(" %")
+    window.hardness_spin.setToolTip("Brush hardness: the part of the radius painted fully; below 100 % the rest is "
+                                    "feathered (partial coverage: a soft edge)")
+    window.hardness_spin.valueChanged.connect(lambda v: window.painter and window.painter.set_hardness(v / 100))
     window.tol_spin = QDoubleSpinBox(objectName="fill_tolerance")
     window.tol_spin.setRange(0.005, 2.0)
     window.tol_spin.setSingleStep(0.01)
@@ -277,7 +289,8 @@ def _install_toolbars(window) -> None:
     window.exposure_spin.setSuffix(" EV")
     window.exposure_spin.setToolTip("Display exposure in stops (does not change the data)")
     window.exposure_spin.valueChanged.connect(lambda v: window.preview and window.preview.set_exposure(v))
-    window._toolbar_widgets = {"brush_size": window.size_spin, "fill_tolerance": window.tol_spin,
+    window._toolbar_widgets = {"brush_size": window.size_spin, "brush_hardness": window.hardness_spin,
+                               "fill_tolerance": window.tol_spin,
                              "display_exposure": window.exposure_spin}
     for name, title, entries in TOOLBARS:
         tb = window.addToolBar(title)

@@ -161,6 +161,7 @@ class MainWindow(QMainWindow):
         self.undo_group.setActiveStack(stack)
         self.painter = Painter(document)
         self.painter.set_size(self.size_spin.value() if self.size_spin.value() > 1 else 20)
+        self.painter.set_hardness(self.hardness_spin.value() / 100)
         self.painter.tolerance = self.tol_spin.value()
         self.painter.set_tool(self._checked_tool())
         with QSignalBlocker(self.size_spin):
@@ -384,6 +385,16 @@ class MainWindow(QMainWindow):
 
     def on_invert_mask(self) -> None:
         self._on_current_target("invert_mask")
+
+    def on_refine_edge(self) -> None:
+        if self.doc is None or self.doc.current == -1:
+            return
+        uid = self.doc.current
+        before = self.doc.history.count()
+        self._guard(self.doc.refine_edge, uid)
+        if self.doc.history.count() != before:
+            t = self.doc.target(uid)
+            self.statusBar().showMessage(f"{t.name!r}: {t.edge_pixels()} edge pixels are partly target", 5000)
 
     def on_overlays(self, on: bool) -> None:
         if self.canvas is not None:

@@ -64,6 +64,27 @@ def ticks_to_kappa(ticks: int) -> float:
     return float(2.0 ** (ticks / TICKS_PER_STOP))
 
 
+def coverage_text(target) -> str:
+    """One line on a target's coverage (Targets panel).
+
+    Examples
+    --------
+    >>> from app.model.target import Target
+    >>> cov = np.array([[1.0, 0.5, 0.0]], np.float32)
+    >>> coverage_text(Target(1, "wall", cov >= 0.5, coverage=cov))
+    'Coverage: 1 px wholly target, 1 edge px partly (mean 50 %): soft edge'
+    >>> coverage_text(Target(1, "wall", cov >= 0.5))
+    'Coverage: 2 px, hard edge (Refine Edge or a feathered brush makes it soft)'
+    """
+    if target.coverage is None or not target.edge_pixels():
+        return f"Coverage: {int(np.count_nonzero(target.mask))} px, hard edge (Refine Edge or a feathered brush " \
+            "makes it soft)"
+    cov = target.coverage
+    part = (cov > 0) & (cov < 1)
+    return (f"Coverage: {int(np.count_nonzero(cov >= 1))} px wholly target, {int(part.sum())} edge px partly "
+            f"(mean {100 * float(cov[part].mean()):.0f} %): soft edge")
+
+
 def _swatch(colour, size: int = 14) -> QIcon:
     pm = QPixmap(size, size)
     pm.fill(QColor(*colour))
@@ -99,10 +120,15 @@ class TargetPanel(QWidget):
         for b in (self.add_button, self.remove_button, self.up_button, self.down_button):
             buttons.addWidget(b)
         buttons.addStretch(1)
+        self.coverage = QLabel(objectName="target_coverage")
+        self.coverage.setWordWrap(True)
+        self.coverage.setToolTip("How much of the selected target is wholly target (re-emitted by the projector) "
+                                 "and how many edge pixels are partly target (recolored from both sides)")
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addWidget(self.list)
         layout.addLayout(buttons)
+        layout.addWidget(self.coverage)
         self.add_button.clicked.connect(lambda: self._guard(self.doc.add_target))
         self.remove_button.clicked.connect(self._remove)
         self.up_button.clicked.connect(lambda: self._move(-1))
@@ -113,6 +139,7 @@ class TargetPanel(QWidget):
         document.events.targets.connect(self.refresh)
         document.events.current.connect(self._on_current)
         document.events.acquisition.connect(self.refresh)
+        document.events.mask.connect(self._on_mask)
         self.refresh()
 
     def refresh(self) -> None:
@@ -141,10 +168,23 @@ class TargetPanel(QWidget):
             self._syncing = False
         self._update_buttons()
 
+    def _on_mask(self, uid: int, _bbox) -> None:
+        if uid == self.doc.current:
+            self._show_coverage()
+
+    def _show_coverage(self) -> None:
+        """The selected target's coverage: pixels wholly on it, and edge pixels partly on it."""
+        uid = self.doc.current
+        if uid == -1:
+            self.coverage.setText("")
+            return
+        self.coverage.setText(coverage_text(self.doc.target(uid)))
+
     def _uid(self, item) -> int:
         return -1 if item is None else int(item.data(Qt.ItemDataRole.UserRole))
 
     def _update_buttons(self) -> None:
+        self._show_coverage()
         uid = self.doc.current
         has = uid != -1
         self.remove_button.setEnabled(has and not self.doc.mask_lock(uid))

@@ -223,10 +223,12 @@ class RigControl(QObject):
                 for sig in (self._watched.events.targets, self._watched.events.acquisition):
                     sig.disconnect(self._on_document_changed)
                 self._watched.events.kappa.disconnect(self._on_kappa)
+                self._watched.events.mask.disconnect(self._on_mask)
             if doc is not None:
                 for sig in (doc.events.targets, doc.events.acquisition):
                     sig.connect(self._on_document_changed)
                 doc.events.kappa.connect(self._on_kappa)
+                doc.events.mask.connect(self._on_mask)
             self._watched = doc
         self._on_document_changed()
 
@@ -234,6 +236,16 @@ class RigControl(QObject):
         """Only the fixed κ of earlier cascade targets matter to the dock (not a slider drag on the last)."""
         included = [t.uid for t in self.w.doc.acquisition_targets()] if self.w.doc is not None else []
         if uid in included[:-1]:
+            self._on_document_changed()
+
+    def _on_mask(self, uid: int, _bbox) -> None:
+        """The dock follows masks as painted; a target whose edge turned soft (or hard) hands it its new array."""
+        panel = self.panel
+        if panel is None or panel.busy or self.w.doc is None:
+            return
+        held = {name: m for name, m in panel.targets}
+        t = self.w.doc.target(uid)
+        if t.name in held and held[t.name] is not t.acquired_mask():
             self._on_document_changed()
 
     def _on_document_changed(self, *_args) -> None:
@@ -244,7 +256,7 @@ class RigControl(QObject):
         if panel.session is not self.w.session:
             panel.set_session(self.w.session)
         targets = [] if doc is None else doc.acquisition_targets()
-        panel.set_targets([(t.name, t.mask) for t in targets], [t.kappa for t in targets[:-1]])
+        panel.set_targets([(t.name, t.acquired_mask()) for t in targets], [t.kappa for t in targets[:-1]])
 
     def _branch(self, reason: str):
         """The session holds another plan, or a calibration of another set-up: offer a new session folder."""

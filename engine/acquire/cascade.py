@@ -85,7 +85,7 @@ class _Plan:
         self.emitters = [
             Emitter(
                 p.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau,
-                settings.negative, p.direct_matrix,
+                settings.negative, p.direct_matrix, settings.complete_direct,
             )
             for p in prepared
         ]

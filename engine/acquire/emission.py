@@ -46,6 +46,9 @@ class Emission:
         +1, or -1 for the negative part of a split emission.
     name : str
         Suffix naming the capture within its step (``"r"``, ``"g-neg"``, ``"rgb"``).
+    shortfall : (H, W, 3) float32 or None
+        Direct radiance the pattern was meant to put on the target's camera pixels minus
+        what it puts there (before ``scale`` is undone), see :meth:`Emitter.shortfall`.
     """
 
     pattern: np.ndarray
@@ -53,6 +56,7 @@ class Emission:
     scale: float
     sign: int
     name: str
+    shortfall: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,6 +83,9 @@ class Emitter:
         Per-pixel direct response of each camera channel to each primary. With
         ``per_channel=False`` the RGB pattern solves ``direct_matrix @ light = wanted`` per
         pixel: colour crosstalk corrected, one capture per re-emission.
+    complete_direct : bool
+        Record each emission's :attr:`Emission.shortfall` (:meth:`shortfall`), so that the
+        capture can be completed with the direct light the projector could not give.
     """
 
     correspondence: Correspondence
@@ -89,6 +96,7 @@ class Emitter:
     tau: float = 1.0
     negative: str = Negative.CLAMP
     direct_matrix: np.ndarray | None = None
+    complete_direct: bool = True
 
     def __post_init__(self) -> None:
         if not 0.0 < float(self.tau) <= 1.0:
@@ -130,10 +138,57 @@ class Emitter:
                 scale = self.tau / peak
                 proj = warp_to_projector(plane * scale, self.correspondence, target=self.target)
                 proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
+                short = None
+                if self.complete_direct:
+                    short = self._direct(plane * scale, channels) - self._direct(self._lit(proj), channels)
                 if self.response is not None:
                     proj = self.response.linearize(proj)
-                out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix))
+                out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix, short))
         return out, clamped
+
+    def _lit(self, projector_light: np.ndarray) -> np.ndarray:
+        """(H, W, 3): the linear light each target camera pixel's projector pixel emits (0 elsewhere)."""
+        corr, t = self.correspondence, self.target
+        lit = np.zeros(t.shape + (3,), np.float32)
+        lit[t] = projector_light[corr.y[t], corr.x[t]]
+        return lit
+
+    def _direct(self, light: np.ndarray, channels: tuple[int, ...]) -> np.ndarray:
+        """Direct radiance of the target's camera pixels lit by ``light`` (H, W, 3; primaries ``channels``)."""
+        t = self.target
+        out = np.zeros(t.shape + (3,), np.float32)
+        if self.per_channel or self.direct_matrix is None:
+            out[..., channels] = np.where(t[:, :, None], self.direct * light, 0)[..., channels]
+        else:
+            out[t] = np.einsum("nck,nk->nc", self.direct_matrix[t], light[t])
+        return out
+
+    @staticmethod
+    def shortfall(emissions: list[Emission]) -> np.ndarray | None:
+        """Direct radiance the emissions meant to put on the target and did not, scaling undone.
+
+        A projector pixel lights every camera pixel that sees it with one value, the mean of
+        their ``wanted / D``, when the camera has more pixels than the projector. The direct
+        term of each such camera pixel is then ``D(x) L(p(x))``, not the ``wanted(x)`` Eq. 6
+        assumes: the difference is zero on average over the projector pixel, but it holds the
+        camera noise of ``wanted`` that the mean removed, which Eq. 6 expects to see again
+        (re-emitted noise cancels between successive observations). Both terms are known, so
+        adding the difference to the capture restores the direct term (up to the error of
+        D). The interreflections the difference would have caused are not restored: it
+        averages to zero over each projector pixel, so they are small. Clamped negative light
+        is not part of it (the rest of the scene did not receive it either).
+
+        Returns
+        -------
+        (H, W, 3) float32 or None
+            ``Σ sign · shortfall / scale``; None when there are no emissions.
+        """
+        out = None
+        for em in emissions:
+            if em.shortfall is not None:
+                part = (em.sign / em.scale) * em.shortfall
+                out = part if out is None else out + part
+        return out
 
     def _light(self, wanted: np.ndarray) -> np.ndarray:
         """Projector light (per primary, camera pixels) whose direct reflection is ``wanted``."""

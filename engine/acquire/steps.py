@@ -32,16 +32,30 @@ class CaptureSettings:
         Largest linear light fraction emitted (Sec. 6 step 1).
     negative : {"clamp", "split"}
         Handling of negative wanted light (noise), see :class:`engine.acquire.emission.Negative`.
+    complete_direct : bool
+        Add to each re-emission's capture the direct light the target's camera pixels were
+        meant to get and did not, because one projector pixel lights several of them with one
+        value (:meth:`engine.acquire.emission.Emitter.shortfall`). False only to measure what
+        it is worth (the behaviour before it existed).
     """
 
     per_channel: bool = True
     differences: bool = True
     tau: float = 1.0
     negative: str = Negative.CLAMP
+    complete_direct: bool = True
 
     def to_dict(self) -> dict:
-        """JSON form, stored in the session."""
-        return {"per_channel": self.per_channel, "differences": self.differences, "tau": self.tau, "negative": str(self.negative)}
+        """JSON form, stored in the session (``complete_direct`` only when off: older plans stay equal)."""
+        out = {"per_channel": self.per_channel, "differences": self.differences, "tau": self.tau,
+               "negative": str(self.negative)}
+        return out if self.complete_direct else out | {"complete_direct": False}
+
+    @classmethod
+    def from_dict(cls, values: dict) -> CaptureSettings:
+        """The settings :meth:`to_dict` stored."""
+        return cls(per_channel=values["per_channel"], differences=values["differences"], tau=values["tau"],
+                   negative=values["negative"], complete_direct=values.get("complete_direct", True))
 
     def captures_per_step(self) -> int:
         """Captures one re-emission costs."""
@@ -85,7 +99,9 @@ def reemit(recorder: Recorder, emitter: Emitter, wanted: np.ndarray, base: np.nd
     Returns
     -------
     light : (H, W, 3) float32
-        ``T`` applied to ``wanted`` (Eq. 5), base light removed, scaling undone.
+        ``T`` applied to ``wanted`` (Eq. 5), base light removed, scaling undone; the target's
+        direct term completed where a projector pixel lit several camera pixels with their
+        mean (:meth:`Emitter.shortfall`).
     names : list of str
         The captures taken.
     clamped : int
@@ -97,4 +113,6 @@ def reemit(recorder: Recorder, emitter: Emitter, wanted: np.ndarray, base: np.nd
         meta = {"kind": "reemission", "channels": list(em.channels), "scale": em.scale, "sign": em.sign}
         captures.append(recorder.capture(cname, em.pattern, meta=meta))
         names.append(cname)
-    return Emitter.combine(emissions, captures, base), names, clamped
+    light = Emitter.combine(emissions, captures, base)
+    short = Emitter.shortfall(emissions)
+    return (light if short is None else light + short), names, clamped

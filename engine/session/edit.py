@@ -127,14 +127,25 @@ def check_target_name(name) -> str:
 
 
 def mask_digest(mask) -> str:
-    """A 16-digit content digest of a ``(H, W) bool`` mask (the acquisition plan records these).
+    """A 16-digit content digest of a mask (the acquisition plan records these).
+
+    A ``(H, W) bool`` mask, or a soft mask (float coverage, :mod:`engine.edge`): one with
+    coverage strictly between 0 and 1 hashes its float32 values, one of 0 and 1 only hashes
+    as the boolean mask it is.
 
     Examples
     --------
-    >>> mask_digest(np.eye(3, dtype=bool))
-    '7ea7187532e1d4da'
+    >>> mask_digest(np.eye(3, dtype=bool)), mask_digest(np.eye(3, dtype=np.float32))
+    ('7ea7187532e1d4da', '7ea7187532e1d4da')
+    >>> mask_digest(np.eye(3, dtype=np.float32) * 0.5)
+    'f6fce89bcf4bb698'
     """
-    return hashlib.sha256(np.packbits(np.asarray(mask, bool)).tobytes()).hexdigest()[:16]
+    arr = np.asarray(mask)
+    if arr.dtype.kind == "f" and ((arr > 0) & (arr < 1)).any():
+        data = b"coverage" + np.ascontiguousarray(arr, np.float32).tobytes()
+    else:
+        data = np.packbits(arr.astype(bool) if arr.dtype.kind != "f" else arr >= 1).tobytes()
+    return hashlib.sha256(data).hexdigest()[:16]
 
 
 def mask_name(target: str, digest: str) -> str:

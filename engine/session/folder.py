@@ -23,6 +23,7 @@ import numpy as np
 
 from engine import imageio
 from engine.checks import check_float_image, check_mask, check_order, check_resolution
+from engine.edge import check_coverage, is_soft
 from engine.errors import DiskFull, InputError, SessionError
 from engine.session import arrays as _arrays
 from engine.session import cache as _cache
@@ -527,31 +528,45 @@ class Session:
     # ------------------------------------------------------------------ masks
 
     def write_mask(self, name: str, mask: np.ndarray) -> None:
-        """Store (or replace) a target mask as ``masks/<name>.png``.
+        """Store (or replace) a target mask as ``masks/<name>.png``, a soft one as ``.exr``.
 
         Parameters
         ----------
         name : str
             Mask name (a session file name; :func:`engine.session.edit.mask_name` derives one
             from a target's display name).
-        mask : (H, W) bool
-            Camera pixels.
+        mask : (H, W) bool, or (H, W) float coverage in [0, 1]
+            Camera pixels. A soft mask (some coverage strictly between 0 and 1,
+            :mod:`engine.edge`) is stored as float32 EXR and read back exactly; a float mask of
+            0 and 1 only is stored as the boolean mask it is.
         """
         check_name("mask", name)
-        mask = check_mask("mask", mask, self.camera_resolution)
-        rel = f"masks/{name}.png"
+        if np.asarray(mask).dtype.kind == "f":
+            mask = check_coverage("mask", mask, self.camera_resolution)
+            if not is_soft(mask):
+                mask = mask >= 1.0
+        else:
+            mask = check_mask("mask", mask, self.camera_resolution)
+        soft = mask.dtype.kind == "f"
+        rel = f"masks/{name}.exr" if soft else f"masks/{name}.png"
         with self._writing():
             file = writable(self._root, self.path, rel)
             try:
-                imageio.write_image(file, mask.astype(np.uint8) * np.uint8(255))
+                if soft:
+                    imageio.write_image(file, mask[:, :, None], channel_names=("Y",))
+                else:
+                    imageio.write_image(file, mask.astype(np.uint8) * np.uint8(255))
             except InputError as exc:
                 raise self._write_failed(f"mask {name!r}", exc, mask.size, "the session is as it was") from exc
             new = copy.deepcopy(self._manifest)
-            new["masks"][name] = {"file": rel, "shape": list(mask.shape)}
+            old = new["masks"].get(name)
+            new["masks"][name] = {"file": rel, "shape": list(mask.shape)} | ({"soft": True} if soft else {})
             self._commit(new)
+            if old is not None and old["file"] != rel:  # a hard mask became soft or back: drop the other file
+                inside(self._root, self.path, old["file"], f"mask {name!r}").unlink(missing_ok=True)
 
     def read_mask(self, name: str) -> np.ndarray:
-        """Read mask ``name`` as ``(H, W) bool``; SessionError if unknown, missing or corrupt."""
+        """Read mask ``name``: ``(H, W) bool`` (float32 coverage if soft); SessionError if missing or corrupt."""
         with self._lock:
             entry = self._manifest["masks"].get(name)
         if entry is None:
@@ -563,6 +578,11 @@ class Session:
             raise SessionError(f"mask {name!r}: {exc}") from exc
         if pixels.shape != (*entry["shape"], 1):
             raise SessionError(f"mask {name!r}: {file} has shape {pixels.shape}, expected {tuple(entry['shape'])}")
+        if entry.get("soft"):
+            try:
+                return check_coverage(f"mask {name!r}", pixels[..., 0], tuple(entry["shape"]))
+            except InputError as exc:
+                raise SessionError(f"{exc} ({file} is damaged)") from exc
         return pixels[..., 0] > 0.5
 
     # ------------------------------------------------------------------ calibration

@@ -77,7 +77,7 @@ def check_folder(root: Path, path: Path, manifest: dict, *, verify: bool) -> lis
         _captures.check_file(file, entry, camera, where, verify=verify)
     for name, entry in manifest["masks"].items():
         inside(root, path, entry["file"], f"mask {name!r}")
-        _expect(f"mask {name!r}", entry["file"], f"masks/{name}.png")
+        _expect(f"mask {name!r}", entry["file"], f"masks/{name}.exr" if entry.get("soft") else f"masks/{name}.png")
     for key, entry in manifest["calibration"]["arrays"].items():
         inside(root, path, entry["file"], f"calibration array {key!r}")
         _expect(f"calibration array {key!r}", entry["file"], f"calibration/{key}.exr", f"calibration/{key}.npy")

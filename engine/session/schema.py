@@ -76,7 +76,7 @@ _SETTINGS = Obj(required={
     "differences": Bool(),
     "tau": Num(0, 1, positive=True),
     "negative": Str(choices=("clamp", "split")),
-})
+}, optional={"complete_direct": Bool()})
 
 _ADAPTIVE = Obj(required={
     "policy": Str(choices=("brute", "linear", "span")),
@@ -131,7 +131,7 @@ _PLAIN = OneOf(Str(max_len=1024), Num(), Bool(), expected="a string, number or b
 FINGERPRINT = Map(Str(min_len=1, max_len=64), OneOf(_PLAIN, List(_PLAIN, max_len=64),
                                                    expected="a string, number, boolean or a list of them"))
 
-_MASK = Obj(required={"file": Str(min_len=1), "shape": _RESOLUTION})
+_MASK = Obj(required={"file": Str(min_len=1), "shape": _RESOLUTION}, optional={"soft": Bool()})
 _ARRAY_KEY = Str(pattern=f"{NAME.pattern}/{NAME.pattern}", expected="'group/name'")
 _ARRAY = Obj(required={"file": Str(min_len=1), "shape": List(Int(0)), "dtype": _DTYPE})
 

@@ -12,6 +12,7 @@ from engine.acquire.cascade import CascadeResult
 from engine.calibrate import Calibration, fill_correspondence
 from engine.checks import check_kappa, check_mask
 from engine.decompose import Decomposition
+from engine.edge import check_coverage, is_soft, solid
 from engine.errors import InputError, SessionError
 from engine.figurate import MAX_ORDER
 from engine.progress import Progress, ShouldStop
@@ -23,7 +24,7 @@ from engine.workflow.decomposition import decomposition_key
 
 __all__ = [
     "MAX_FRAMES", "CaptureResult", "Preflight", "Unreachable", "capture_plan", "check_frames", "check_targets",
-    "estimated_report", "preflight", "run_capture",
+    "estimated_report", "preflight", "run_capture", "solid_part",
 ]
 
 #: Frames averaged per capture, at most (noise falls as 1/sqrt(frames); beyond this it is hours).
@@ -71,8 +72,9 @@ class Preflight:
     Attributes
     ----------
     calibration : Calibration
-    targets : list of (str, (H, W) bool)
-        The targets to capture (with ``leave_out``, without their unreachable pixels).
+    targets : list of (str, (H, W) bool or float32 coverage)
+        The targets to capture (with ``leave_out``, without their unreachable pixels); soft
+        masks stay soft, a float mask of 0 and 1 only becomes boolean.
     left_out : dict of str to int
         Pixels left out per target name (``leave_out`` only).
     plan : dict
@@ -90,7 +92,9 @@ def check_targets(targets, shape: tuple[int, int], *, unreachable: np.ndarray | 
 
     Parameters
     ----------
-    targets : sequence of (str, (H, W) bool)
+    targets : sequence of (str, (H, W) bool or float coverage)
+        Hard masks, or soft masks (coverage in [0, 1], :mod:`engine.edge`) whose solid
+        pixels are re-emitted and whose edge pixels are recolored from both sides.
     shape : (H, W)
         The camera resolution.
     unreachable : (H, W) bool, optional
@@ -100,11 +104,12 @@ def check_targets(targets, shape: tuple[int, int], *, unreachable: np.ndarray | 
     ------
     InputError
         No target, a name a user could not have typed or used twice, a mask of another shape,
-        an empty target, overlapping targets, or unreachable pixels.
+        an empty target (a soft one: no pixel wholly on it), overlapping targets (soft ones:
+        coverages summing past 1), or unreachable pixels.
     """
     if not targets:
         raise InputError("no target to acquire: add a target and paint it first")
-    names, total = [], np.zeros(shape, np.int32)
+    names, total = [], np.zeros(shape, np.float64)
     for name, mask in targets:
         check_target_name(name)
         if name in names:
@@ -114,18 +119,44 @@ def check_targets(targets, shape: tuple[int, int], *, unreachable: np.ndarray | 
         if mask.shape != tuple(shape):
             raise InputError(f"target {name!r} is {mask.shape[1]}×{mask.shape[0]} pixels but the camera is "
                              f"{shape[1]}×{shape[0]}")
-        mask = check_mask(f"target {name!r}", mask, shape)
+        if mask.dtype.kind == "f":
+            mask = check_coverage(f"target {name!r}", mask, shape)
+            if mask.any() and not solid(mask).any():
+                raise InputError(f"target {name!r} has no pixel wholly on it (coverage 1): paint its inside too")
+        else:
+            mask = check_mask(f"target {name!r}", mask, shape)
         if not mask.any():
             raise InputError(f"target {name!r} is empty: paint it before acquiring")
         total += mask
-    if (total > 1).any():
-        raise InputError("targets overlap: a pixel may belong to one target only")
+    if (total > 1 + 1e-6).any():
+        raise InputError("targets overlap: a pixel may belong to one target only (soft masks: coverages may not "
+                         "sum past 1)")
     if unreachable is not None:
-        conflicts = {n: int(np.count_nonzero(np.asarray(m, bool) & unreachable)) for n, m in targets}
+        conflicts = {n: int(np.count_nonzero(solid_part(m) & unreachable)) for n, m in targets}
         listed = ", ".join(f"{n!r}: {c} px" for n, c in conflicts.items() if c)
         if listed:
             raise InputError(f"targets cover pixels the projector cannot reach ({listed}); their light cannot be "
                              "re-emitted. Erase them (shown hatched) before acquiring.")
+
+
+def _as_mask(mask) -> np.ndarray:
+    """A checked target mask as ``(H, W) bool``, or float32 coverage when it is soft."""
+    arr = np.asarray(mask)
+    if arr.dtype.kind == "f":
+        return arr.astype(np.float32) if is_soft(arr) else solid(arr)
+    return arr.astype(bool)
+
+
+def solid_part(mask) -> np.ndarray:
+    """(H, W) bool: the pixels of a hard or soft mask that are wholly target (the ones re-emitted).
+
+    Examples
+    --------
+    >>> solid_part(np.array([[0.0, 0.5, 1.0]], np.float32)).tolist(), solid_part(np.array([[True]])).tolist()
+    ([[False, False, True]], [[True]])
+    """
+    arr = np.asarray(mask)
+    return solid(arr) if arr.dtype.kind == "f" else arr.astype(bool)
 
 
 def check_frames(frames) -> int:
@@ -171,7 +202,7 @@ def preflight(
     check_rig(calibration, rig)
     targets = [(str(name), mask) for name, mask in targets]
     check_targets(targets, calibration.camera_resolution)
-    targets = [(name, np.asarray(mask, bool)) for name, mask in targets]
+    targets = [(name, _as_mask(mask)) for name, mask in targets]
     if order != "auto" and (isinstance(order, bool) or not isinstance(order, (int, np.integer))
                             or not 1 <= order <= MAX_ORDER):
         raise InputError(f"order must be an integer in 1..{MAX_ORDER} or 'auto', got {order!r}")
@@ -196,17 +227,18 @@ def preflight(
     if unreachable is not Unreachable.ESTIMATE:
         kept = []
         for name, mask in targets:
-            bad = mask & ~fill_correspondence(calibration.correspondence, mask)[0].valid
-            if bad.any() and (unreachable is Unreachable.REFUSE or bad.sum() == mask.sum()):
+            hard = solid_part(mask)
+            bad = hard & ~fill_correspondence(calibration.correspondence, hard)[0].valid
+            if bad.any() and (unreachable is Unreachable.REFUSE or bad.sum() == hard.sum()):
                 counts = calibration.correspondence.counts(bad)
                 why = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if n and k != "decoded")
                 raise InputError(
-                    f"Target {name!r}: {int(bad.sum())} of {int(mask.sum())} painted pixels cannot be reached by the "
+                    f"Target {name!r}: {int(bad.sum())} of {int(hard.sum())} painted pixels cannot be reached by the "
                     f"projector ({why}). Erase them from the target (the calibration's coverage map shows where the "
                     "projector reaches), or move the projector and recalibrate.")
             if bad.any():
                 left_out[name] = int(bad.sum())
-            kept.append((name, mask & ~bad))
+            kept.append((name, np.where(bad, 0, mask).astype(mask.dtype) if mask.dtype.kind == "f" else mask & ~bad))
         targets = kept
     plan = capture_plan(targets, order, fixed_kappa=fixed_kappa, settings=settings, adaptive=adaptive,
                         photograph_pattern=photograph_pattern is not None)

@@ -180,9 +180,7 @@ def _recompute(session: Session, rig=None) -> Decomposition:
     for name, digest in zip(plan["targets"], plan["masks"], strict=True):
         stored = mask_name(name, digest)
         targets.append((name, session.read_mask(stored if stored in masks else name)))  # older sessions: by name
-    s = plan["settings"]
-    settings = CaptureSettings(per_channel=s["per_channel"], differences=s["differences"], tau=s["tau"],
-                               negative=s["negative"])
+    settings = CaptureSettings.from_dict(plan["settings"])
     adaptive = None if plan["adaptive"] is None else Adaptive(**plan["adaptive"])
     recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session)
     result = acquire_cascade(recorder, load_calibration(session), targets, plan["order"],

@@ -76,3 +76,29 @@ def test_margin_keeps_emission_off_projector_pixels_next_to_the_edge(bench):
     near_edge = cv2.dilate((cov < 1).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     assert (tight.mask & ~wide.mask & near_edge).sum() > 0.5 * (tight.mask & ~wide.mask).sum()
     assert (wide.unreachable == (cov >= 1) & ~wide.mask).all()
+
+
+def test_a_soft_target_goes_through_a_session_and_comes_back_soft(tmp_path):
+    from engine.session import Session
+    from engine.session.edit import mask_digest, mask_name
+    from engine.workflow import load_decomposition, run_calibration, run_capture
+
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(24, 24), supersample=4,
+                          cache_dir=tmp_path / "cache") as rig:
+        session = Session.create(tmp_path / "s", rig_name=rig.identity, camera_resolution=rig.camera.resolution,
+                                 projector_resolution=rig.projector.resolution)
+        run_calibration(rig, session)
+        cov = rig.coverage["right_wall"]
+        mixed = (cov > 0) & (cov < 1)
+        result = run_capture(rig, session, [("wall", cov)], 2)
+    stored = session.read_mask(mask_name("wall", mask_digest(cov)))
+    assert stored.dtype == np.float32 and np.array_equal(stored, cov)  # exactly, not quantised
+    assert session.state["plan"]["masks"] == [mask_digest(cov)] != [mask_digest(cov > 0)]
+    d = result.decomposition
+    assert not (d.target & ~(cov >= 1)).any()  # only solid pixels are re-emitted
+    photo = result.acquisition.observations[0]
+    np.testing.assert_allclose(recolor(d, 1.0)[mixed], photo[mixed], rtol=1e-5, atol=1e-6)
+    # recomputed from the session's captures and its stored soft mask: the same decomposition
+    again = load_decomposition(Session.open(tmp_path / "s"), key="0123456789abcdef")
+    np.testing.assert_array_equal(again.components, d.components)
+    np.testing.assert_array_equal(again.unreached, d.unreached)

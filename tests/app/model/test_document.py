@@ -209,3 +209,21 @@ def test_noise_reduction_swaps_the_decomposition_and_back(acquired_doc, syntheti
     doc.discard_acquisition()
     with pytest.raises(InputError, match="nothing is acquired"):
         doc.set_noise_reduction(0)
+
+
+def test_a_soft_edge_is_saved_and_reopened_exactly(tmp_path):
+    from app.model.files import create_session, open_document
+
+    img = np.full((12, 16, 3), 0.2, np.float32)
+    img[:, 8:] = 0.8
+    img[:, 7] = 0.35
+    doc = Document(img)
+    hard = doc.add_target("wall", np.zeros((12, 16), bool) | (np.arange(16) >= 8)[None, :])
+    doc.add_target("plain", np.eye(12, 16, dtype=bool))
+    assert doc.refine_edge(hard.uid) == 12
+    create_session(tmp_path / "s", doc)
+    again, _, _ = open_document(tmp_path / "s")
+    wall, plain = again.by_name("wall"), again.by_name("plain")
+    np.testing.assert_array_equal(wall.coverage, hard.coverage)
+    np.testing.assert_array_equal(wall.mask, hard.mask)
+    assert plain.coverage is None and plain.mask.dtype == bool

@@ -79,7 +79,7 @@ def test_one_drag_is_one_undo_step_storing_its_bounding_box(doc):
     assert doc.history.count() == n + 1
     atom = doc.history._commands[-1]
     y0, y1, x0, x1 = atom.bbox
-    assert atom.before.shape == (y1 - y0, x1 - x0) and atom.before.size < H * W / 2
+    assert atom.before[0].shape == (y1 - y0, x1 - x0) and atom.before[0].size < H * W / 2
     second = t.mask.copy()
     doc.history.undo()
     np.testing.assert_array_equal(t.mask, first)
@@ -197,3 +197,73 @@ def test_refused_edit_becomes_a_warning_not_an_exception(acquired_doc):
 
 def test_capsule_outside_the_image():
     assert capsule((-50, -50), (-40, -40), 2, (10, 10)) == (None, None)
+
+
+def test_a_feathered_brush_paints_partial_coverage_and_one_drag_undoes_at_once(doc):
+    from app.model.painting import feathered_capsule
+
+    t = doc.target(doc.current)
+    p = Painter(doc)
+    p.set_size(10)
+    p.set_hardness(0.4)
+    n = doc.history.count()
+    _drag(p, [(10, 10), (20, 12)])
+    assert doc.history.count() == n + 1
+    cov = t.coverage
+    # the union of the stamps along the drag: max of the swept stamp (press, move, release)
+    bbox, w = feathered_capsule((10, 10), (20, 12), 5.0, 0.4, (H, W))
+    y0, y1, x0, x1 = bbox
+    np.testing.assert_array_equal(cov[y0:y1, x0:x1], w)
+    assert 0 < t.edge_pixels() == np.count_nonzero((w > 0) & (w < 1))
+    np.testing.assert_array_equal(t.mask, cov >= 0.5)
+    assert t.acquired_mask().dtype == np.float32
+    # the eraser's feather lowers coverage to 1 - weight
+    p.set_tool(Tool.ERASER)
+    _drag(p, [(20, 12), (20, 12)])
+    _, e = feathered_capsule((20, 12), (20, 12), 5.0, 0.4, (H, W))
+    assert cov[12, 20] == 0 and cov[12, 24] == pytest.approx(min(w[12 - y0, 24 - x0], 1 - e[5, 9]))
+    doc.history.undo()
+    np.testing.assert_array_equal(t.coverage[y0:y1, x0:x1], w)
+    doc.history.undo()
+    assert not t.coverage.any() and not t.mask.any() and t.edge_pixels() == 0
+    assert t.acquired_mask().dtype == bool  # a coverage of 0/1 only is a binary mask
+
+
+def test_hard_tools_on_a_soft_edge_keep_its_coverage_outside_what_they_change(doc):
+    t = doc.target(doc.current)
+    p = Painter(doc)
+    p.set_size(8)
+    p.set_hardness(0.0)
+    _drag(p, [(30, 20), (30, 20)])  # a soft dab on the red patch's left edge
+    soft = t.coverage.copy()
+    assert t.edge_pixels() > 0
+    p.set_hardness(1.0)
+    _drag(p, [(5, 35), (5, 35)])  # a hard dab far away: the soft dab stays soft
+    np.testing.assert_array_equal(t.coverage[10:30, 30:50], soft[10:30, 30:50])
+    assert t.coverage[35, 5] == 1
+    p.set_tool(Tool.FILL)
+    p.fill(t.uid, 45, 15)  # the red patch: coverage 1 there, the soft dab's feather outside it kept
+    assert (t.coverage[10:30, 30:50] == 1).all()
+    outside = soft.copy()
+    outside[10:30, 30:50] = 0
+    assert ((t.coverage >= outside) | (outside == 0)).all() and t.edge_pixels() > 0
+    doc.history.undo()
+    np.testing.assert_array_equal(t.coverage[10:30, 30:50], soft[10:30, 30:50])
+    doc.invert_mask(t.uid)
+    np.testing.assert_allclose(t.coverage[10:30, 30:50], 1 - soft[10:30, 30:50])
+
+
+def test_refine_edge_finds_the_coverage_of_mixed_pixels_and_undoes(doc):
+    img = np.full((H, W, 3), 0.1, np.float32)
+    img[:, 30:] = 0.9
+    img[:, 29] = 0.1 + 0.8 * 0.25  # a quarter of column 29 is the bright wall
+    d = Document(img)
+    t = d.add_target("wall", np.zeros((H, W), bool) | (np.arange(W) >= 30)[None, :])
+    assert d.refine_edge(t.uid) == H
+    np.testing.assert_allclose(t.coverage[:, 29], 0.25, atol=1e-6)
+    assert (t.coverage[:, 30:] == 1).all() and not t.mask[:, 29].any()
+    assert d.history.undo_text() == "Refine edge 'wall'"
+    d.history.undo()
+    assert t.edge_pixels() == 0 and t.acquired_mask().dtype == bool
+    d.history.redo()
+    assert t.edge_pixels() == H

