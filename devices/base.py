@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from engine.errors import InputError
 from engine.rig import Camera, Frame, Projector
 
-__all__ = ["Camera", "Frame", "Projector", "Rig"]
+__all__ = ["Camera", "Frame", "Projector", "Rig", "SimulatedRig"]
 
 
 class Rig:
@@ -88,3 +89,46 @@ class Rig:
 
     def __repr__(self) -> str:
         return f"Rig({self.name!r}, camera={self.camera.resolution}, projector={self.projector.resolution})"
+
+
+class SimulatedRig(Rig):
+    """A :class:`Rig` over a simulated scene (virtual or path traced): switchable scene light.
+
+    Parameters
+    ----------
+    name, camera, projector, targets, truth, fingerprint
+        As :class:`Rig`.
+    renderer : object
+        The backend's renderer; its ``ambient`` flag says whether captures see the scene's
+        own light.
+    lighting : dict
+        The scene's natural lighting: ``"ambient"`` (bool) and ``"projector_flood"`` (the
+        uniform projector input level, 0 = projector black).
+    coverage : dict[str, (H, W) float32], optional
+        Fraction of each pixel's footprint on each target (0/1 unless pixels are supersampled):
+        the soft mask a perfect matting would give.
+    """
+
+    def __init__(self, name, camera, projector, *, targets, truth, renderer, lighting: dict, coverage=None,
+                 fingerprint=None):
+        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
+        self.coverage: dict[str, np.ndarray] = dict(coverage or {})
+        self.renderer = renderer
+        self.lighting = dict(lighting)
+
+    @property
+    def ambient(self) -> bool:
+        """Whether the scene's own light (not the projector) is on: captures see it."""
+        return self.renderer.ambient
+
+    @ambient.setter
+    def ambient(self, value: bool) -> None:
+        if not isinstance(value, (bool, np.bool_)):
+            raise InputError(f"ambient must be True or False, got {value!r}")
+        self.renderer.ambient = bool(value)
+
+    def flood(self) -> None:
+        """Apply the scene's natural lighting: ambient on/off and the projector flood level."""
+        self.ambient = self.lighting["ambient"]
+        hp, wp = self.projector.resolution
+        self.projector.show(np.full((hp, wp, 3), self.lighting["projector_flood"], np.float32))

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from devices.base import Frame, Rig
+from devices.base import Frame, SimulatedRig
 from devices.registry import Availability
 from devices.virtual.camera import CameraModel, VirtualCamera
 from devices.virtual.projector import ProjectorModel, VirtualProjector
@@ -86,8 +86,8 @@ class MitsubaCamera(VirtualCamera):
         self._renderer.spp = _positive_int(value, "spp")
 
 
-class MitsubaRig(Rig):
-    """A :class:`devices.base.Rig` over a Mitsuba scene, with a switchable ambient light.
+class MitsubaRig(SimulatedRig):
+    """A :class:`devices.base.SimulatedRig` over a Mitsuba scene.
 
     Attributes
     ----------
@@ -99,29 +99,6 @@ class MitsubaRig(Rig):
     truth : devices.mitsuba.truth.Truth
     renderer : devices.mitsuba.render.Renderer
     """
-
-    def __init__(self, name, camera, projector, *, targets, coverage, truth, renderer, lighting, fingerprint=None):
-        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
-        self.coverage = coverage
-        self.renderer = renderer
-        self._lighting = lighting
-
-    @property
-    def ambient(self) -> bool:
-        """Whether the scene's own light (not the projector) is on."""
-        return self.renderer.ambient
-
-    @ambient.setter
-    def ambient(self, value: bool) -> None:
-        if not isinstance(value, (bool, np.bool_)):
-            raise InputError(f"ambient must be True or False, got {value!r}")
-        self.renderer.ambient = bool(value)
-
-    def flood(self) -> None:
-        """Apply the scene's natural lighting: ambient on/off and the projector flood level."""
-        self.ambient = self._lighting["ambient"]
-        hp, wp = self.projector.resolution
-        self.projector.show(np.full((hp, wp, 3), self._lighting["projector_flood"], np.float32))
 
 
 def open_rig(arg: str, **options) -> MitsubaRig:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from devices.base import Rig
+from devices.base import SimulatedRig
 from devices.registry import Availability
 from devices.virtual.camera import CameraModel, VirtualCamera
 from devices.virtual.projector import ProjectorModel, VirtualProjector
@@ -40,8 +40,8 @@ def default_cache_dir() -> Path:
     return Path(base) / "albedit" / "virtual"
 
 
-class VirtualRig(Rig):
-    """A :class:`devices.base.Rig` over a simulated scene, with a switchable ambient light.
+class VirtualRig(SimulatedRig):
+    """A :class:`devices.base.SimulatedRig` over a scene of the virtual rig.
 
     Attributes
     ----------
@@ -50,8 +50,7 @@ class VirtualRig(Rig):
     targets : dict[str, (H, W) bool]
         The scene's named targets rasterised into camera masks (pixel centres).
     coverage : dict[str, (H, W) float32]
-        Fraction of each pixel's footprint on each target (0/1 unless pixels are supersampled):
-        the soft mask a perfect matting would give.
+        Fraction of each pixel's footprint on each target (0/1 unless pixels are supersampled).
     truth : Truth
     scene : Scene
     setup : Setup
@@ -62,28 +61,10 @@ class VirtualRig(Rig):
     projector: VirtualProjector
 
     def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer, coverage=None, fingerprint=None):
-        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
-        self.coverage = dict(coverage or {})
-        self._renderer = renderer
+        super().__init__(name, camera, projector, targets=targets, truth=truth, renderer=renderer,
+                         lighting=renderer.scene.lighting, coverage=coverage, fingerprint=fingerprint)
         self.scene: Scene = renderer.scene
         self.setup: Setup = renderer.setup
-
-    @property
-    def ambient(self) -> bool:
-        """Whether the scene's ambient light is on (captures see it)."""
-        return self._renderer.ambient
-
-    @ambient.setter
-    def ambient(self, value: bool) -> None:
-        if not isinstance(value, (bool, np.bool_)):
-            raise InputError(f"ambient must be True or False, got {value!r}")
-        self._renderer.ambient = bool(value)
-
-    def flood(self) -> None:
-        """Apply the scene's natural lighting: ambient on/off and the projector flood level."""
-        self.ambient = self.scene.lighting["ambient"]
-        hp, wp = self.projector.resolution
-        self.projector.show(np.full((hp, wp, 3), self.scene.lighting["projector_flood"], np.float32))
 
 
 def probe() -> list[Availability]:

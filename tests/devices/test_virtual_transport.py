@@ -140,14 +140,14 @@ def test_furnace_closed_box_conserves_energy_exactly(tmp_path):
                    cache_dir=False)
     img = rig.truth.photograph().astype(np.float64)
     np.testing.assert_allclose(img, 1.0 / (1.0 - 0.5), rtol=1e-6)
-    r = rig._renderer
+    r = rig.renderer
     e = r.direct_light(None, ambient=True, dtype=np.float64)
     live = rig.setup.quad >= 0
     np.testing.assert_allclose(e[live], 1.0, rtol=1e-9)  # each point sees the other walls, F sums to 1
 
 
 def test_reflected_light_never_exceeds_received_light(cornell):
-    r = cornell._renderer
+    r = cornell.renderer
     e = r.direct_light(np.ones((64, 64, 3), np.float32), ambient=True, dtype=np.float64)
     radiance = r.base.solve(e)
     from devices.virtual.transport import gather
