@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from app.model.document import Document
-from app.model.files import unreachable_pixels
+from app.model.files import unlit_pixels
 from engine.errors import InputError, SessionError
 from engine.progress import checkpoint, report
 
@@ -196,7 +196,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
                                  progress=_stage(progress, f"acquiring {DEMO_TARGET!r}"), should_stop=should_stop)
             photo, decomposition, key = result.acquisition.observations[0], result.decomposition, result.key
         photo = np.ascontiguousarray(photo, np.float32)
-        doc = Document(photo, unreachable=unreachable_pixels(calibration), source=rig_name, truth=rig.truth)
+        doc = Document(photo, unreachable=unlit_pixels(calibration), source=rig_name, truth=rig.truth)
         for other, mask in targets.items():  # the acquired target last: the end of its cascade
             if other != DEMO_TARGET:
                 t = doc.add_target(other, mask)

@@ -13,7 +13,7 @@ fails half way leaves the previous save intact ("nothing lost").
 
 Which capture is the photograph: :func:`engine.workflow.photograph_name`. A mask named
 ``"unreachable"`` marks camera pixels the projector cannot light; without one, they are taken
-from the session's calibration (:func:`unreachable_pixels`).
+from the session's calibration (:func:`unlit_pixels`).
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ def open_document(path, *, history=None) -> tuple[Document, Session | None, list
     return doc, None, []
 
 
-def unreachable_pixels(calibration) -> np.ndarray:
+def unlit_pixels(calibration) -> np.ndarray:
     """Camera pixels the projector does not light at all (shadow, outside its frame).
 
     Pixels whose Gray code merely had low contrast are not included: acquisition
@@ -118,7 +118,7 @@ def unreachable_pixels(calibration) -> np.ndarray:
 
 def _calibrated_unreachable(session: Session) -> np.ndarray | None:
     try:
-        return unreachable_pixels(load_calibration(session))
+        return unlit_pixels(load_calibration(session))
     except SessionError:
         return None  # no (usable) calibration: nothing is known to be unreachable
 

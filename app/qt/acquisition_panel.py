@@ -36,7 +36,7 @@ from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
 from engine.workflow import Unreachable, check_rig, estimated_report, load_calibration, preflight, run_capture
 
-__all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
+__all__ = ["AcquisitionPanel", "POLICIES", "unreachable_target_pixels"]
 
 #: Adaptive-capture choices: (label, engine policy).
 POLICIES = (("brute force (capture everything)", "brute"), ("linear prediction (paper)", "linear"),
@@ -50,7 +50,7 @@ def _esc(text: str) -> str:
     return html.escape(text, quote=False)
 
 
-def unreachable_pixels(calibration, mask: np.ndarray) -> np.ndarray:
+def unreachable_target_pixels(calibration, mask: np.ndarray) -> np.ndarray:
     """Target pixels the projector cannot reach: no correspondence, even after filling.
 
     Undecoded pixels surrounded by decoded ones of the same target (concave corners) get a

@@ -14,7 +14,7 @@ import pytest  # noqa: E402
 from PySide6.QtWidgets import QMessageBox  # noqa: E402
 
 import devices  # noqa: E402
-from app.qt.acquisition_panel import AcquisitionPanel, unreachable_pixels  # noqa: E402
+from app.qt.acquisition_panel import AcquisitionPanel, unreachable_target_pixels  # noqa: E402
 from engine.acquire import CaptureSettings  # noqa: E402
 from engine.acquire.target import pattern_budget  # noqa: E402
 from engine.calibrate import PixelStatus  # noqa: E402
@@ -197,8 +197,8 @@ def test_refuses_a_target_the_projector_cannot_reach(wedge_offset, make_panel, d
     painted = shadow & ~rig.targets["left"]
     panel = make_panel(rig, session, [("left", rig.targets["left"]), ("backdrop", painted)], [(1.5, 1.0, 1.0)],
                        synchronous=True)
-    assert not unreachable_pixels(calibration, rig.targets["left"]).any()
-    assert unreachable_pixels(calibration, painted).sum() == painted.sum()
+    assert not unreachable_target_pixels(calibration, rig.targets["left"]).any()
+    assert unreachable_target_pixels(calibration, painted).sum() == painted.sum()
     refused = []
     panel.refused.connect(refused.append)
     panel.start_button.click()
@@ -233,7 +233,7 @@ def test_leave_out_trims_only_the_unreachable_pixels(wedge_offset, make_panel, q
     calibration = load_calibration(session)
     shadow = calibration.correspondence.status == PixelStatus.UNLIT
     painted = rig.targets["left"] | shadow  # painted over the edge into the projector's shadow
-    bad = unreachable_pixels(calibration, painted)
+    bad = unreachable_target_pixels(calibration, painted)
     assert bad.any() and not bad.all()
     panel = make_panel(rig, session, [("left", painted)])
     panel.order.setValue(2)

@@ -44,11 +44,11 @@ def test_demo_acquires_the_right_wall_like_fig6(demo):
 def test_unreachable_pixels_are_the_unlit_ones():
     from types import SimpleNamespace
 
-    from app.model.files import unreachable_pixels
+    from app.model.files import unlit_pixels
 
     status = np.array([[0, 1, 2, 3]], np.uint8)  # decoded, unlit, low contrast, out of range
     cal = SimpleNamespace(correspondence=SimpleNamespace(status=status))
-    assert unreachable_pixels(cal).tolist() == [[False, True, False, True]]
+    assert unlit_pixels(cal).tolist() == [[False, True, False, True]]
 
 
 def test_demo_session_reopens_with_its_acquisition(demo):
