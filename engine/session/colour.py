@@ -120,6 +120,7 @@ class CheckerRecord:
     def to_json(self) -> dict:
         """The JSON form stored under ``state["colour"]["checker"]``."""
         s = self.scale
+        residual, used = self._fit()
         return {
             "corners": [[float(x), float(y)] for x, y in self.checker.corners],
             "source": self.checker.source,
@@ -129,8 +130,8 @@ class CheckerRecord:
             "scale": [float(v) for v in s.scale],
             "plane": None if s.plane is None else [float(v) for v in s.plane],
             "patch_direct": _rows(self.patch_direct),
-            "residual": _rows(s.residual),
-            "used": [bool(u) for u in s.used],
+            "residual": _rows(residual),
+            "used": [bool(u) for u in used],
         }
 
     @classmethod
@@ -157,8 +158,15 @@ class CheckerRecord:
         return cls(Checker(corners, (int(h), int(w)), data["source"]), data["captures"], data["sensitivities"],
                    data["illuminant"], scale, _array(data["patch_direct"]))
 
+    def _fit(self) -> tuple[np.ndarray, np.ndarray]:
+        """The fit's per-patch residuals and used patches (a checker fit always has both)."""
+        residual, used = self.scale.residual, self.scale.used
+        if residual is None or used is None:
+            raise ValueError("a colour-checker record needs its fit's per-patch residuals and used patches")
+        return residual, used
+
     def report(self) -> str:
         """One line: how the chart was placed and how well its patches fit the published reflectances."""
-        used = int(self.scale.used.sum())
+        used = int(self._fit()[1].sum())
         return (f"colour checker ({self.checker.source}): {used} of {PATCHES} patches fit the published reflectances "
                 f"to {self.scale.rms_residual:.1%} rms")

@@ -18,6 +18,7 @@ import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path, PurePosixPath
+from typing import Any
 
 import numpy as np
 
@@ -634,7 +635,9 @@ class Session:
             raise InputError(f"calibration data must be a dict, got {type(data).__name__}")
         self._write_arrays(arrays or {}, data=data, replace=True, keep=tuple(keep))
 
-    def read_calibration(self, *, groups: tuple[str, ...] | None = None) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+    def read_calibration(
+        self, *, groups: tuple[str, ...] | None = None
+    ) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
         """Return ``(data, arrays)`` as given to :meth:`write_calibration` (and :meth:`write_array`).
 
         ``groups`` limits the arrays read to those groups (``()``: the JSON data alone).
@@ -802,8 +805,7 @@ class Session:
                 raise OSError(errno.EIO, "the manifest written does not read back")
 
         try:
-            imageio.atomic_write(self.path / MANIFEST, lambda temp: temp.write_text(text, encoding="utf-8"),
-                                 verify=verify)
+            imageio.atomic_write(self.path / MANIFEST, lambda temp: _write_text(temp, text), verify=verify)
         except OSError as exc:
             raise self._write_failed(MANIFEST, exc, len(text.encode()),
                                      "the previous manifest is intact") from exc
@@ -815,6 +817,10 @@ class Session:
         return write_failed(self.path, what, exc, needed, kept)
 
 
+def _write_text(path: Path, text: str) -> None:
+    path.write_text(text, encoding="utf-8")
+
+
 def _signature(path: Path) -> tuple[int, int, int] | None:
     try:
         st = os.stat(Path(path) / MANIFEST)
@@ -824,7 +830,7 @@ def _signature(path: Path) -> tuple[int, int, int] | None:
 
 
 def _new_manifest(rig_name: str, camera, projector, metadata: dict, fingerprint: dict | None) -> dict:
-    rig = {"name": rig_name, "camera_resolution": list(camera), "projector_resolution": list(projector)}
+    rig: dict[str, Any] = {"name": rig_name, "camera_resolution": list(camera), "projector_resolution": list(projector)}
     if fingerprint is not None:
         rig["fingerprint"] = fingerprint
     return {

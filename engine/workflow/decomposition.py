@@ -16,6 +16,7 @@ from engine.acquire import Adaptive, CaptureSettings, Recorder, acquire_cascade
 from engine.decompose import Decomposition
 from engine.denoise import denoise_components
 from engine.errors import DeviceError, InputError, SessionError
+from engine.rig import Camera, Frame, Projector
 from engine.session import Session
 from engine.session.edit import Edit, mask_name
 from engine.workflow.calibration import load_calibration
@@ -138,17 +139,24 @@ def _cache_best_effort(session: Session, key: str, d: Decomposition) -> None:
 class _OfflineCamera:
     """A camera that has no frames: a recompute finds every capture in the session or fails."""
 
+    resolution: tuple[int, int]
+    exposure: float
+    gain: float
+
     def __init__(self, session: Session):
         self.resolution = session.camera_resolution
         self.exposure, self.gain = 1.0, 1.0
         self._path = session.path
 
-    def capture(self):
+    def capture(self) -> Frame:
         raise DeviceError(f"session {self._path} lacks a capture its plan needs; recapture with the rig "
                           "(`albedit capture` on the same session resumes)")
 
 
 class _OfflineProjector:
+    resolution: tuple[int, int]
+    bit_depth: int
+
     def __init__(self, session: Session):
         self.resolution = session.projector_resolution
         self.bit_depth = int(session.metadata.get("projector_bit_depth", 8))
@@ -163,8 +171,8 @@ class _OfflineRig:
 
     name: str
     identity: str
-    camera: _OfflineCamera
-    projector: _OfflineProjector
+    camera: Camera
+    projector: Projector
 
     @classmethod
     def of(cls, session: Session) -> _OfflineRig:
