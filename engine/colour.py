@@ -10,6 +10,9 @@ the direct components of two papers).
 Colours are linear RGB in the photograph's units unless said otherwise. Display colours
 (hex, sRGB, CIE Lab) are decoded with colour-science to linear values that show as that
 colour at display exposure 0 (the ``to_*`` functions take the display's ``exposure``).
+
+Over 500 lines on purpose: the colour spaces, the target's colour and κ from a colour share one
+white balance and one exposure rule, and the convergence limits are judged in the same terms.
 """
 
 from __future__ import annotations

@@ -8,6 +8,9 @@ Vocabulary (DESIGN.md): a *target* is a set of camera pixels whose albedo is sca
 once a cascade has been acquired, the κ of every target but the last one shaped the light
 emitted for the later ones, so they are locked; only the last target's κ stays free and is
 the one :func:`engine.recolor.recolor` applies to the decomposition.
+
+Over 500 lines on purpose: every edit of the document (masks, coverage, κ, order, acquisition,
+noise reduction) is a command on one history, and the invariants they keep are checked here together.
 """
 
 from __future__ import annotations

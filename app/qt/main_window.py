@@ -6,6 +6,9 @@ canvas) and runs every long piece of work — opening, saving, exporting, noise 
 and toolbars are the tables of :mod:`app.qt.actions`; the rig (calibration wizard, acquisition
 dock) is :class:`~app.qt.rig_control.RigControl`. Errors are shown as dialogs with the engine's
 message; nothing the user did is dropped when something fails.
+
+Over 500 lines on purpose: it wires the document's events to every dock, view and job; the
+menus' slots live in file_control and rig_control, the tables in actions.
 """
 
 from __future__ import annotations
