@@ -18,6 +18,7 @@ import numpy as np
 from engine._checks import check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
+from engine.figurate import outside_matrix, transport_matrix
 
 #: Elements per Horner tile: small enough for the accumulator to stay in cache.
 _TILE = 3 * (1 << 15)
@@ -79,6 +80,42 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
         for s in starts:
             run(s)
     return out.reshape(h, w, c)
+
+
+def recolor_weights(decomposition: Decomposition, kappa) -> np.ndarray:
+    """Weights ``v`` such that the unconstrained recolor is ``Σ_r v_r · observations[r]``.
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+        Only its order, target and unreached-light flag are used.
+    kappa : float or (C,) array_like
+
+    Returns
+    -------
+    (K, H, W, C) float32
+        Inside the target ``v = M⁻ᵀ k`` with ``k_i = κ^{i+1}`` (Eq. 3, 6); outside it the same
+        with Eq. 9's matrix and ``(1, κ, …, κ^{K-1})`` (Eq. 4). How observation noise reaches the
+        recolored image when no constraint is active.
+
+    Examples
+    --------
+    >>> d = Decomposition(np.zeros((2, 1, 2, 1), np.float32), np.zeros((1, 2, 1), np.float32), np.array([[True, False]]))
+    >>> recolor_weights(d, 1.0)[:, 0, :, 0].tolist()   # κ = 1 returns the photograph
+    [[1.0, 1.0], [0.0, 0.0]]
+    """
+    if not isinstance(decomposition, Decomposition):
+        raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
+    k, h, w, c = decomposition.components.shape
+    kap = check_kappa(kappa, c)
+    powers = np.arange(1, k + 1)[:, None]
+    inside = np.linalg.solve(transport_matrix(k).T, kap[None, :] ** powers)  # (K, C)
+    if decomposition.unreached_light:
+        outside = np.linalg.solve(outside_matrix(k).T, kap[None, :] ** (powers - 1))
+    else:
+        outside = inside
+    t = decomposition.target[None, :, :, None]
+    return np.where(t, inside[:, None, None, :], outside[:, None, None, :]).astype(np.float32)
 
 
 @dataclass(frozen=True, eq=False)

@@ -16,19 +16,21 @@ on the same target (:mod:`engine.acquire.predict`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from engine._checks import check_kappa, check_order
 from engine.acquire.emission import Emitter
+from engine.acquire.noise import Noise, covariance_stack
 from engine.acquire.predict import Adaptive, Policy, Predictor, relative_error
 from engine.acquire.recorder import Recorder
-from engine.acquire.steps import Acquisition, CaptureSettings, reemit
+from engine.acquire.steps import Acquisition, CaptureSettings, EmittedNoise, reemit
 from engine.acquire.target import PreparedTarget, pattern_budget, prepare_target
 from engine.calibrate import Calibration
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
-from engine.recolor import recolor
+from engine.recolor import recolor, recolor_weights
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,8 +71,23 @@ class _Sequence:
         self.trusted = False
 
 
+class _Measured(NamedTuple):
+    """An image of the plan and its noise (None when the camera's noise is unknown)."""
+
+    image: np.ndarray
+    noise: Noise | None
+
+    def __add__(self, other: "_Measured") -> "_Measured":
+        both = self.noise is not None and other.noise is not None
+        return _Measured(self.image + other.image, self.noise + other.noise if both else None)
+
+    def __sub__(self, other: "_Measured") -> "_Measured":
+        both = self.noise is not None and other.noise is not None
+        return _Measured(self.image - other.image, self.noise - other.noise if both else None)
+
+
 class _Plan:
-    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix):
+    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix, shared):
         self.recorder = recorder
         self.prepared = prepared
         self.kappas = kappas
@@ -87,6 +104,15 @@ class _Plan:
             )
             for p in prepared
         ]
+        # D's relative error per target: one noise source shared by every re-emission on it
+        self.direct_noise = [
+            None if p.direct_variance is None else
+            (f"D:{prefix}-{i}", np.where(p.mask[:, :, None], np.sqrt(p.direct_variance) / np.where(p.direct > 0, p.direct, 1), 0)
+             .astype(np.float32))
+            for i, p in enumerate(prepared)
+        ]
+        # noise sources more than one image holds: their covariances must survive merging
+        self.shared = set(shared) | {d[0] for d in self.direct_noise if d is not None}
         # (level, emission target) -> light emitted on the target -> the scene's response with
         # targets < level recolored: level 0 raw captures, level >= 1 recolored observations
         self.predictors = {}
@@ -94,7 +120,7 @@ class _Plan:
         self.clamped = 0
         self.track_predictions = False  # validate predictions even when never using them (auto order)
 
-    def respond(self, level: int, target: int, wanted: np.ndarray, path: str, seq: _Sequence) -> np.ndarray:
+    def respond(self, level: int, target: int, wanted: _Measured, path: str, seq: _Sequence) -> _Measured:
         """The response to emitting ``wanted`` on ``target``, targets < ``level`` recolored.
 
         Level 0 is a capture (base light removed). Level ≥ 1 is a recolored observation: a
@@ -104,7 +130,7 @@ class _Plan:
         """
         predictor = self.predictors.setdefault((level, target), Predictor(self.prepared[target].mask))
         policy = Policy(self.adaptive.policy)
-        guess = predictor.predict(wanted) if policy is not Policy.BRUTE or self.track_predictions else None
+        guess = predictor.predict(wanted.image) if policy is not Policy.BRUTE or self.track_predictions else None
         use_guess = guess is not None and (
             (policy is Policy.SPAN and guess.bound < self.adaptive.threshold) or (policy is Policy.LINEAR and seq.trusted)
         )
@@ -112,23 +138,28 @@ class _Plan:
         if use_guess:
             self.log.append({"path": path, "target": target, "level": level, "source": "predicted",
                              "captures": [], "bound": guess.bound, "images": saves})
-            return guess.image
+            return _Measured(guess.image, guess.noise)
         if level == 0:
-            image, names, clamped = reemit(self.recorder, self.emitters[target], wanted, self.base, name=f"{self.prefix}-{path}")
-            self.clamped += clamped
-            entry = {"path": path, "target": target, "level": 0, "source": "captured", "captures": names}
+            emitted = None
+            if wanted.noise is not None and self.base.noise is not None:
+                emitted = EmittedNoise(wanted.noise, self.base.noise, self.direct_noise[target])
+            done = reemit(self.recorder, self.emitters[target], wanted.image, self.base.image,
+                          name=f"{self.prefix}-{path}", noise=emitted)
+            self.clamped += done.clamped
+            result = _Measured(done.light, done.noise)
+            entry = {"path": path, "target": target, "level": 0, "source": "captured", "captures": done.names}
         else:
-            image = self._recolor_lower(level, (target, wanted, seq), path)
+            result = self._recolor_lower(level, (target, wanted, seq), path)
             entry = {"path": path, "target": target, "level": level, "source": "computed", "captures": []}
         if guess is not None:
-            entry["prediction_error"] = relative_error(guess.image, image)
+            entry["prediction_error"] = relative_error(guess.image, result.image)
             if policy is Policy.LINEAR and entry["prediction_error"] < self.adaptive.threshold:
                 seq.trusted = True
         self.log.append(entry)
-        predictor.add(wanted, image)
-        return image
+        predictor.add(wanted.image, result.image, result.noise)
+        return result
 
-    def observations(self, level: int, target: int, lighting, path: str, *, auto: bool = False) -> np.ndarray:
+    def observations(self, level: int, target: int, lighting, path: str, *, auto: bool = False) -> list[_Measured]:
         """The K observations of ``target`` under ``lighting``, targets < level recolored.
 
         With ``auto`` (one target, Sec. 5's last paragraph) captures continue until the linear
@@ -147,9 +178,9 @@ class _Plan:
                 break
         if auto:
             self.order = len(obs)
-        return np.stack(obs).astype(np.float32)
+        return obs
 
-    def recolored(self, level: int, lighting, path: str) -> np.ndarray:
+    def recolored(self, level: int, lighting, path: str) -> _Measured:
         """The scene under ``lighting`` (None: the photograph's) with targets < level recolored."""
         if lighting is not None:
             target, wanted, seq = lighting
@@ -158,11 +189,18 @@ class _Plan:
             return self.photograph
         return self._recolor_lower(level, None, path)
 
-    def _recolor_lower(self, level: int, lighting, path: str) -> np.ndarray:
+    def _recolor_lower(self, level: int, lighting, path: str) -> _Measured:
         """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ."""
         t = level - 1
         obs = self.observations(t, t, lighting, path)
-        return recolor(self.prepared[t].decompose(obs), self.kappas[t])
+        d = self.prepared[t].decompose(np.stack([o.image for o in obs]).astype(np.float32))
+        image = recolor(d, self.kappas[t])
+        if any(o.noise is None for o in obs):
+            return _Measured(image, None)
+        noise = Noise()
+        for weight, o in zip(recolor_weights(d, self.kappas[t]), obs):
+            noise = noise + o.noise * weight
+        return _Measured(image, noise.merged(self.shared))
 
 
 def acquire_cascade(
@@ -245,24 +283,33 @@ def acquire_cascade(
     t_count = len(targets)
     d_cost = 0 if prepared is not None else t_count * pattern_budget(True)
     recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + (k**t_count - 1) * settings.captures_per_step()
+    if recorder.noise is None and calibration.noise is not None:
+        recorder.noise = calibration.noise
     photo_pattern = recorder.black() if photograph_pattern is None else np.asarray(photograph_pattern, np.float32)
-    photograph = recorder.capture(f"{prefix}-photograph", photo_pattern, meta={"kind": "photograph"})
-    base = photograph if photograph_pattern is None else recorder.capture(f"{prefix}-black", recorder.black(), meta={"kind": "black"})
+    photo_name = f"{prefix}-photograph"
+    photograph = _measure(recorder, photo_name, photo_pattern, {"kind": "photograph"})
+    base_name = photo_name if photograph_pattern is None else f"{prefix}-black"
+    base = photograph if photograph_pattern is None else _measure(recorder, base_name, recorder.black(), {"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{n}")
+            prepare_target(recorder, calibration, m, base.image, name=f"{prefix}-{n}")
             for n, m in targets
         ]
-    plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)
+    plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix,
+                 {photo_name, base_name})
     last = t_count - 1
     plan.track_predictions = auto
-    obs = plan.observations(last, last, None, "", auto=auto)
+    measured = plan.observations(last, last, None, "", auto=auto)
+    obs = np.stack([m.image for m in measured]).astype(np.float32)
+    covariance = None
+    if all(m.noise is not None for m in measured):
+        covariance = covariance_stack([m.noise for m in measured], obs.shape[1:])
     captured = [e for e in plan.log if e["source"] == "captured"]
     predicted = sum(e["images"] for e in plan.log if e["source"] == "predicted")
     acq_log = [{"index": 0, "source": "photograph", "captures": [f"{prefix}-photograph"]}] + [
         {"index": i + 1, **e} for i, e in enumerate(plan.log) if e["source"] != "computed"
     ]
-    acquisition = Acquisition(obs, prepared[last], base, plan.clamped, acq_log)
+    acquisition = Acquisition(obs, prepared[last], base.image, plan.clamped, acq_log, covariance)
     return CascadeResult(
         acquisition=acquisition,
         targets=list(zip(names, prepared)),
@@ -272,6 +319,13 @@ def acquire_cascade(
         captures=1 + sum(len(e["captures"]) for e in captured),
         log=acq_log,
     )
+
+
+def _measure(recorder: Recorder, name: str, pattern: np.ndarray, meta: dict) -> _Measured:
+    """A capture and its noise (one source named after it)."""
+    image = recorder.capture(name, pattern, meta=meta)
+    var = recorder.last_variance
+    return _Measured(image, None if var is None else Noise.source(name, np.sqrt(var)))
 
 
 def acquire_single(

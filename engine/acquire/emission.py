@@ -111,7 +111,7 @@ class Emitter:
             Number of target pixel-channels whose negative value was emitted as zero.
         """
         t = self.target[:, :, None]
-        light = self._light(wanted)  # linear projector light per primary, camera space
+        light = self.light(wanted)  # linear projector light per primary, camera space
         clamped = int(np.count_nonzero((light < 0) & t))
         if self.negative == Negative.SPLIT:
             parts = [(np.maximum(light, 0), 1, ""), (np.maximum(-light, 0), -1, "-neg")]
@@ -135,7 +135,7 @@ class Emitter:
                 out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix))
         return out, clamped
 
-    def _light(self, wanted: np.ndarray) -> np.ndarray:
+    def light(self, wanted: np.ndarray) -> np.ndarray:
         """Projector light (per primary, camera pixels) whose direct reflection is ``wanted``."""
         t = self.target[:, :, None]
         if self.per_channel or self.direct_matrix is None:

@@ -14,8 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from engine.acquire.emission import Emitter, Negative
+from engine.acquire.noise import Noise
 from engine.acquire.recorder import Recorder
 from engine.acquire.target import PreparedTarget
+from engine.calibrate import projector_to_camera_map
+from engine.noise import quantization_variance
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,12 @@ class Acquisition:
         Target pixel-channels whose negative wanted light was emitted as zero.
     log : list of dict
         One entry per observation: ``{"index", "source": "photograph" | "captured" | "predicted", "captures": [...]}``.
+    covariance : (K(K+1)/2, H, W, 3) float32 or None
+        Covariance of the observations' noise per pixel and channel, packed
+        (:func:`engine.noise.unpack_covariance`): the camera noise of every capture carried
+        through re-emission, base removal and differences (:mod:`engine.acquire.noise`).
+        None when the camera's noise is unknown (a calibration without a noise measurement,
+        on a backend that does not report it).
     """
 
     observations: np.ndarray
@@ -72,6 +81,7 @@ class Acquisition:
     base: np.ndarray
     clamped: int = 0
     log: list = field(default_factory=list)
+    covariance: np.ndarray | None = None
 
     @property
     def images(self) -> int:
@@ -79,22 +89,94 @@ class Acquisition:
         return sum(len(e["captures"]) for e in self.log)
 
 
-def reemit(recorder: Recorder, emitter: Emitter, wanted: np.ndarray, base: np.ndarray, *, name: str) -> tuple[np.ndarray, list[str], int]:
-    """Emit ``wanted`` direct radiance on the target and return the light it causes.
+@dataclass(frozen=True, eq=False)
+class Reemission:
+    """What one re-emission produced.
 
-    Returns
-    -------
+    Attributes
+    ----------
     light : (H, W, 3) float32
-        ``T`` applied to ``wanted`` (Eq. 5), base light removed, scaling undone.
+        ``T`` applied to the wanted radiance (Eq. 5), base light removed, scaling undone.
     names : list of str
         The captures taken.
     clamped : int
+        Target pixel-channels whose negative wanted light was emitted as zero.
+    noise : Noise or None
+        The light's noise (None when the camera's noise is unknown).
+    """
+
+    light: np.ndarray
+    names: list
+    clamped: int
+    noise: Noise | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class EmittedNoise:
+    """The noise that the light a re-emission shows already carries.
+
+    Attributes
+    ----------
+    wanted : Noise
+        Noise of the wanted radiance (made of earlier captures).
+    base : Noise
+        Noise of the base light removed from every capture.
+    direct : (str, (H, W, 3) float32) or None
+        Name of the target's D-error source and D's relative standard deviation.
+    """
+
+    wanted: Noise
+    base: Noise
+    direct: tuple | None = None
+
+
+def reemit(recorder: Recorder, emitter: Emitter, wanted: np.ndarray, base: np.ndarray, *, name: str,
+           noise: EmittedNoise | None = None) -> Reemission:
+    """Emit ``wanted`` direct radiance on the target and return the light it causes.
+
+    With ``noise`` (and a camera whose noise is known), the light's noise is tracked: each
+    capture's own, minus the base's, over the scale; the wanted radiance's noise reflected
+    straight back on the target (divided among the camera pixels that share a projector
+    pixel); the pattern's rounding to the projector's ``bit_depth``; and D's error, which
+    scales the emitted light by ``D / D̂`` (Sec. 3.3).
     """
     emissions, clamped = emitter.emissions(wanted)
-    captures, names = [], []
+    captures, names, variances = [], [], []
     for em in emissions:
         cname = f"{name}-{em.name}"
         meta = {"kind": "reemission", "channels": list(em.channels), "scale": em.scale, "sign": em.sign}
         captures.append(recorder.capture(cname, em.pattern, meta=meta))
+        variances.append(recorder.last_variance)
         names.append(cname)
-    return Emitter.combine(emissions, captures, base), names, clamped
+    light = Emitter.combine(emissions, captures, base)
+    if noise is None or any(v is None for v in variances):
+        return Reemission(light, names, clamped)
+    return Reemission(light, names, clamped, _reemission_noise(recorder, emitter, wanted, emissions, names, variances, noise))
+
+
+def _reemission_noise(recorder, emitter: Emitter, wanted, emissions, names, variances, noise: EmittedNoise) -> Noise:
+    target = emitter.target
+    t3 = target[:, :, None]
+    corr = emitter.correspondence
+    bits = int(getattr(recorder.rig.projector, "bit_depth", 8))
+    shared = projector_to_camera_map(corr, target=target).count  # camera pixels per projector pixel
+    ys, xs = np.nonzero(target & corr.valid)
+    count = np.ones(target.shape, np.float32)
+    count[ys, xs] = np.maximum(shared[corr.y[ys, xs], corr.x[ys, xs]], 1)
+    shown = t3 & np.ones(3, bool)  # where the wanted light is shown (clamped negatives are not)
+    if emitter.negative == Negative.CLAMP:
+        shown = shown & (emitter.light(wanted) > 0)
+    out = noise.wanted * np.where(shown, 1.0 / np.sqrt(count)[:, :, None], 0.0)
+    for em, cname, var in zip(emissions, names, variances):
+        chans = np.zeros(3, np.float32)
+        chans[list(em.channels)] = 1.0
+        factor = np.float32(em.sign / em.scale) * chans
+        out = out + Noise.source(cname, np.sqrt(var) * factor) - noise.base * factor
+        q = quantization_variance(em.pattern, emitter.response, bits)  # projector pixels, linear light
+        q_cam = np.zeros(target.shape + (3,), np.float32)
+        q_cam[ys, xs] = q[corr.y[ys, xs], corr.x[ys, xs]]
+        out = out + Noise.source(f"q:{cname}", emitter.direct * np.sqrt(q_cam) * np.float32(1.0 / em.scale) * chans)
+    if noise.direct is not None:
+        source, relative = noise.direct
+        out = out - Noise.source(source, np.where(shown, np.asarray(wanted, np.float32) * relative, 0))
+    return out

@@ -46,6 +46,9 @@ class PreparedTarget:
         Per pixel, camera channel c's direct radiance per unit of projector primary k
         (``[..., c, k]``): colour crosstalk and albedo together. Measured when D is measured
         per primary; lets one RGB emission replace three single-primary ones.
+    direct_variance : (H, W, 3) float32 or None
+        Variance of D from the camera noise of the captures it was measured from (None when
+        the camera's noise is unknown). D's error is the same in every re-emission.
     """
 
     mask: np.ndarray
@@ -54,6 +57,7 @@ class PreparedTarget:
     correspondence: Correspondence
     filled: int = 0
     direct_matrix: np.ndarray | None = None
+    direct_variance: np.ndarray | None = None
 
     def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3) -> Decomposition:
         """Decompose on the emittable pixels, then estimate the unreachable ones near them.
@@ -149,10 +153,14 @@ def prepare_target(
     ok = painted_valid[:, :, None] & (n_plus > 0) & (n_minus > 0)
     brightest = np.full(base.shape, -np.inf)  # correspondence-free max - min, to check it
     darkest = np.full(base.shape, np.inf)
+    variance = np.zeros(base.shape, np.float64)  # of D: lit and unlit means, base cancels
+    known = True
     for g, channels in enumerate(groups):
         label = "rgb"[channels[0]] if per_channel else "rgb"
         plus = np.zeros(base.shape, np.float64)
         minus = np.zeros_like(plus)
+        var_plus = np.zeros_like(plus)
+        var_minus = np.zeros_like(plus)
         hi = np.full(base.shape, -np.inf)
         lo = np.full(base.shape, np.inf)
         for i, pattern in enumerate(patterns):
@@ -164,11 +172,17 @@ def prepare_target(
             light = cap - base
             plus += np.where(lit_full[i][:, :, None], light, 0)
             minus += np.where(unlit_full[i][:, :, None], light, 0)
+            if recorder.last_variance is None:
+                known = False
+            else:
+                var_plus += np.where(lit_full[i][:, :, None], recorder.last_variance, 0)
+                var_minus += np.where(unlit_full[i][:, :, None], recorder.last_variance, 0)
             np.maximum(hi, light, out=hi)
             np.minimum(lo, light, out=lo)
         matrix[..., g] = np.where(ok, plus / np.maximum(n_plus, 1) - minus / np.maximum(n_minus, 1), 0)
         for c in channels:
             brightest[..., c], darkest[..., c] = hi[..., c], lo[..., c]
+            variance[..., c] = (var_plus / np.maximum(n_plus, 1) ** 2 + var_minus / np.maximum(n_minus, 1) ** 2)[..., c]
     direct = np.stack([matrix[..., c, c] for c in range(3)], -1) if per_channel else matrix[..., 0]
     # a wrong correspondence mixes lit and unlit captures: its D falls far below max - min
     consistent = (direct >= consistency * (brightest - darkest)).all(axis=-1)
@@ -178,7 +192,8 @@ def prepare_target(
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
-    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix)
+    variance = np.where(usable[:, :, None], variance, 0).astype(np.float32) if known else None
+    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix, variance)
 
 
 def _conflicts(corr: Correspondence, target: np.ndarray, *, distance: float = 0.0) -> np.ndarray:
