@@ -8,7 +8,7 @@ for its frame to be painted before the next one is sent, so every sample is one 
 event-to-pixels latency. Budget: p95 ≤ 16 ms.
 
 Zoomed in past the preview's resolution, the app also renders the visible region at full
-resolution once the picture is still (:meth:`app.render.Renderer.render_detail`); its cost is
+resolution once the picture is still (:meth:`app.model.render.Renderer.render_detail`); its cost is
 measured at 100 % and 50 % zoom beside the full-resolution recolor it avoids.
 
     .venv/bin/python bench/preview.py [--height 2160 --width 3840 --order 4 --events 60]
@@ -30,13 +30,13 @@ import numpy as np  # noqa: E402
 from PySide6.QtCore import QEventLoop  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
-from app.canvas import Canvas  # noqa: E402
-from app.display import rgb_to_rgb32  # noqa: E402
-from app.model import Document  # noqa: E402
-from app.painting import Painter  # noqa: E402
-from app.panels import AlbedoPanel  # noqa: E402
-from app.preview import PreviewController  # noqa: E402
-from app.render import Frame, Renderer, Request, View  # noqa: E402
+from app.model.display import rgb_to_rgb32  # noqa: E402
+from app.model.document import Document  # noqa: E402
+from app.model.painting import Painter  # noqa: E402
+from app.model.render import Frame, Renderer, Request, View  # noqa: E402
+from app.qt.canvas import Canvas  # noqa: E402
+from app.qt.panels import AlbedoPanel  # noqa: E402
+from app.qt.preview import PreviewController  # noqa: E402
 from engine.decompose import Decomposition  # noqa: E402
 from engine.imageio import to_display  # noqa: E402
 from engine.recolor import recolor  # noqa: E402

@@ -130,7 +130,7 @@ def main() -> None:
             t_jacobi = _median_time(lambda: jacobi(rig, e), max(2, args.repeat // 2))
             err = np.abs(jacobi(rig, e) - ren.base.solve(e)).max() / np.abs(ren.base.solve(e)).max()
             rows.append((f"  transport solve {size}² (pre-factored)", t_solve, None, None))
-            rows.append((f"  alt: re-factor per capture", t_refactor, t_refactor / t_solve, "alt / pre-factored"))
+            rows.append(("  alt: re-factor per capture", t_refactor, t_refactor / t_solve, "alt / pre-factored"))
             rows.append((f"  alt: bounce iteration to 1e-6 (err {err:.1e})", t_jacobi, t_jacobi / t_solve,
                          "alt / pre-factored"))
             s = rig.setup

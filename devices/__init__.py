@@ -5,6 +5,6 @@ be opened on this machine and why the others can't.
 """
 
 from devices.base import Camera, Frame, Projector, Rig
-from devices.registry import available, open_rig
+from devices.registry import available, available_projectors, open_rig
 
-__all__ = ["Camera", "Frame", "Projector", "Rig", "available", "open_rig"]
+__all__ = ["Camera", "Frame", "Projector", "Rig", "available", "available_projectors", "open_rig"]

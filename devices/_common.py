@@ -1,4 +1,4 @@
-"""Small helpers shared by the real camera backends: bounded device calls and rig assembly.
+"""Small helpers shared by the real camera backends: bounded device calls and option checks.
 
 Vendor libraries block inside C calls that no Python timeout can interrupt. :func:`call_with_timeout`
 runs such a call on a daemon thread and gives up waiting after a deadline, so the caller gets a
@@ -9,7 +9,8 @@ must refuse further calls until it finishes (see :class:`Watchdog`).
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from engine.errors import DeviceError, InputError
 
@@ -100,60 +101,3 @@ def call_with_timeout(fn: Callable[..., Any], *args: Any, timeout: float, what: 
     return Watchdog(device).call(fn, *args, timeout=timeout, what=what)
 
 
-def check_positive(name: str, value, *, allow_none: bool = False) -> float | None:
-    """Return ``value`` as a float if it is a finite number > 0 (an exposure, a timeout)."""
-    if value is None and allow_none:
-        return None
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a positive number, got {value!r}") from None
-    if not v > 0 or v == float("inf"):
-        raise InputError(f"{name} must be a positive finite number, got {value!r}")
-    return v
-
-
-def assemble_rig(name: str, camera, projector=None, **projector_options):
-    """Pair ``camera`` with a projector into a :class:`devices.base.Rig`.
-
-    Parameters
-    ----------
-    name : str
-        Rig name recorded in sessions, e.g. ``"opencv:0"``.
-    camera : devices.base.Camera
-        An open camera; closed again if the projector cannot be opened.
-    projector : str or Projector or None
-        ``None`` (a full-screen window on the second screen), ``"qtscreen:NAME_OR_INDEX"``, or an
-        object implementing the Projector protocol.
-    **projector_options
-        Passed to :func:`devices.qtscreen.open_projector` (``settle``, ``timeout``).
-
-    Notes
-    -----
-    When the camera has ``mark_stale()`` and the projector ``add_shown_callback()``, the camera is
-    told about each new projector frame so it drops buffers queued before the change.
-    """
-    try:
-        if projector is None or isinstance(projector, str):
-            from devices import qtscreen  # the only Qt module in devices/, imported when needed
-
-            proj = qtscreen.projector_from_spec(projector, **projector_options)
-        else:
-            if projector_options:
-                raise InputError(
-                    f"projector options {sorted(projector_options)} only apply to a qtscreen projector, "
-                    f"not to the given {type(projector).__name__}"
-                )
-            proj = projector
-    except BaseException:
-        close = getattr(camera, "close", None)
-        if close is not None:
-            close()
-        raise
-    mark_stale = getattr(camera, "mark_stale", None)
-    add_callback = getattr(proj, "add_shown_callback", None)
-    if mark_stale is not None and add_callback is not None:
-        add_callback(mark_stale)
-    from devices.base import Rig
-
-    return Rig(name, camera, proj)

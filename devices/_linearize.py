@@ -1,20 +1,17 @@
-"""From what a camera hands over to linear radiance: response curves, linear RAW decoding, HDR merge.
+"""From display-encoded camera codes to linear radiance: response curves.
 
 A camera backend never passes gamma-encoded values on (DESIGN.md, "Devices"). Webcams and
 8-bit files are linearised through a :class:`ResponseCurve` (supplied, or measured with OpenCV's
-Debevec calibration); RAW files are decoded by LibRaw without gamma, auto-brightening or
-white balance; and a bracket of exposures is merged into one linear frame.
+Debevec calibration). RAW files are decoded by :func:`engine.imageio.decode_raw`, and clipped
+frames are completed from shorter exposures by the acquisition Recorder
+(``engine.acquire.recorder``), the one HDR merge.
 """
 
 from __future__ import annotations
 
-import io
-import os
-from dataclasses import dataclass
-
 import numpy as np
 
-from engine.errors import DeviceError, InputError
+from engine.errors import InputError
 
 #: code values at or above this fraction of full scale count as clipped (254/255)
 SATURATION_FRACTION = 254.0 / 255.0
@@ -65,7 +62,7 @@ class ResponseCurve:
         return int(self.lut.shape[0])
 
     @classmethod
-    def from_gamma(cls, gamma: float, *, levels: int = 256) -> "ResponseCurve":
+    def from_gamma(cls, gamma: float, *, levels: int = 256) -> ResponseCurve:
         """A power law: radiance = (code / (levels-1)) ** gamma."""
         g = float(gamma)
         if not (np.isfinite(g) and g > 0):
@@ -74,14 +71,14 @@ class ResponseCurve:
         return cls(x**g, name=f"gamma {g:g}")
 
     @classmethod
-    def srgb(cls, *, levels: int = 256) -> "ResponseCurve":
+    def srgb(cls, *, levels: int = 256) -> ResponseCurve:
         """The sRGB transfer function (IEC 61966-2-1), the usual webcam encoding."""
         x = np.linspace(0.0, 1.0, int(levels))
         lin = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
         return cls(lin, name="srgb")
 
     @classmethod
-    def linear(cls, *, levels: int = 65536) -> "ResponseCurve":
+    def linear(cls, *, levels: int = 65536) -> ResponseCurve:
         """Codes already proportional to radiance (RAW-like 16-bit data)."""
         return cls(np.linspace(0.0, 1.0, int(levels)), name="linear")
 
@@ -191,133 +188,3 @@ def calibrate_response(images, exposures, *, samples: int = 70, smoothness: floa
     resp = cal.process(imgs, times).reshape(256, 3).astype(np.float64)
     resp = np.maximum.accumulate(np.maximum(resp, 0.0), axis=0)
     return ResponseCurve(resp, name="debevec")
-
-
-# --------------------------------------------------------------------------------------- RAW
-
-RAW_EXTENSIONS = frozenset(
-    ".3fr .arw .cr2 .cr3 .crw .dcr .dng .erf .iiq .k25 .kdc .mef .mos .mrw .nef .nrw .orf .pef "
-    ".raf .raw .rw2 .rwl .sr2 .srf .srw .x3f".split()
-)
-
-
-@dataclass(frozen=True)
-class RawDecode:
-    """A RAW file decoded linearly.
-
-    Attributes
-    ----------
-    image : (H, W, 3) float32
-        Black level removed, 1.0 = white level; camera colour space, no white balance.
-    saturated : (H, W) bool
-        Pixels whose photosite (or a neighbour it was interpolated from) reached the white level.
-    black_level : float
-        Mean black level removed, in raw units.
-    white_level : float
-        The sensor's clipping level, in raw units.
-    """
-
-    image: np.ndarray
-    saturated: np.ndarray
-    black_level: float
-    white_level: float
-
-
-def decode_raw(source: bytes | str | os.PathLike) -> RawDecode:
-    """Decode a RAW file linearly with rawpy (LibRaw).
-
-    Parameters
-    ----------
-    source : bytes or path
-        The file's bytes (as downloaded from a camera) or its path.
-
-    Returns
-    -------
-    RawDecode
-
-    Raises
-    ------
-    DeviceError
-        LibRaw cannot read the data (corrupt, truncated or unsupported file).
-
-    Notes
-    -----
-    ``postprocess(**engine.imageio.raw_postprocess_options(), user_flip=0)``, i.e. gamma (1, 1),
-    no auto-brightening, 16 bits, raw colour, ``user_wb=[1, 1, 1, 1]``, ``adjust_maximum_thr=0.0``: ``adjust_maximum_thr`` must be
-    0, or LibRaw rescales each frame by its own maximum and two captures stop being comparable.
-    Black and white level come from the file.
-    """
-    import rawpy
-
-    from engine.imageio import raw_postprocess_options
-
-    data = io.BytesIO(bytes(source)) if isinstance(source, (bytes, bytearray, memoryview)) else os.fspath(source)
-    try:
-        with rawpy.imread(data) as raw:
-            mosaic = raw.raw_image_visible.copy()
-            white = float(raw.white_level)
-            black = float(np.mean(raw.black_level_per_channel))
-            rgb = raw.postprocess(**raw_postprocess_options(), user_flip=0)
-    except (rawpy.LibRawError, rawpy.NotSupportedError, OSError, ValueError, EOFError) as exc:
-        raise DeviceError(f"could not decode the RAW data: {exc}") from None
-    image = rgb.astype(np.float32) / np.float32(65535.0)
-    saturated = np.any(rgb >= 65535, axis=2)
-    if mosaic.shape == rgb.shape[:2]:
-        clipped = mosaic >= white
-        if clipped.any():  # demosaicing spreads a clipped photosite to its 3x3 neighbours
-            pad = np.pad(clipped, 1)
-            grown = np.zeros_like(clipped)
-            for dy in range(3):
-                for dx in range(3):
-                    grown |= pad[dy : dy + clipped.shape[0], dx : dx + clipped.shape[1]]
-            saturated |= grown
-    return RawDecode(image=image, saturated=saturated, black_level=black, white_level=white)
-
-
-# --------------------------------------------------------------------------------------- HDR
-
-
-def merge_exposures(images, saturated, exposures) -> tuple[np.ndarray, np.ndarray]:
-    """Merge a bracket of linear radiance images into one, ignoring clipped pixels.
-
-    Parameters
-    ----------
-    images : sequence of (H, W, 3) float
-        Linear radiance, each already divided by its own exposure (so unclipped pixels agree).
-    saturated : sequence of (H, W) bool
-        Clipped pixels of each image.
-    exposures : sequence of float
-        Exposure times in seconds; the weight of an unclipped pixel (longer = less noise).
-
-    Returns
-    -------
-    image : (H, W, 3) float32
-        Exposure-weighted mean over the images where the pixel is not clipped; where it is clipped
-        in all of them, the shortest exposure's value (a lower bound).
-    saturated : (H, W) bool
-        Pixels clipped in every image.
-
-    Examples
-    --------
-    >>> a = np.full((1, 2, 3), 2.0, np.float32); b = np.full((1, 2, 3), 4.0, np.float32)
-    >>> img, sat = merge_exposures([a, b], [np.array([[True, False]]), np.zeros((1, 2), bool)], [1.0, 0.25])
-    >>> img[0, :, 0].tolist(), sat.tolist()
-    ([4.0, 2.4000000953674316], [[False, False]])
-    """
-    ims = [np.asarray(im, dtype=np.float32) for im in images]
-    sats = [np.asarray(s, dtype=bool) for s in saturated]
-    t = np.asarray(exposures, dtype=np.float64)
-    if not (len(ims) == len(sats) == t.size >= 1):
-        raise InputError(f"need one saturation mask and one exposure per image, got {len(ims)}, {len(sats)}, {t.size}")
-    if any(im.shape != ims[0].shape for im in ims) or any(s.shape != ims[0].shape[:2] for s in sats):
-        raise InputError("bracketed images and masks must all have the same shape")
-    num = np.zeros(ims[0].shape, np.float64)
-    den = np.zeros(ims[0].shape[:2], np.float64)
-    for im, s, ti in zip(ims, sats, t):
-        w = np.where(s, 0.0, ti)
-        num += im * w[..., None]
-        den += w
-    all_clipped = den == 0
-    shortest = ims[int(np.argmin(t))]
-    merged = np.where(all_clipped[..., None], shortest, num / np.where(all_clipped, 1.0, den)[..., None])
-    return merged.astype(np.float32), all_clipped

@@ -1,75 +1,17 @@
 """The device protocols every backend implements, and the :class:`Rig` that pairs them.
 
-Nothing outside ``devices/`` knows a vendor API: acquisition and calibration talk only to
-these protocols.
+The protocols (:class:`Frame`, :class:`Camera`, :class:`Projector`) live where they are
+consumed, in :mod:`engine.rig`, and are re-exported here for the backends. Nothing outside
+``devices/`` knows a vendor API: acquisition and calibration talk only to these protocols.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
-
 import numpy as np
 
+from engine.rig import Camera, Frame, Projector
 
-@dataclass(frozen=True)
-class Frame:
-    """One capture: linear radiance plus how it was taken.
-
-    Attributes
-    ----------
-    image : (H, W, 3) float32
-        Linear radiance, black level removed and divided by exposure and gain, so two frames
-        of the same light at different exposures agree. Never gamma-encoded.
-    exposure : float
-        Exposure time in seconds.
-    gain : float
-        Linear sensor gain (ISO / base ISO).
-    black_level : float
-        Black level removed from the raw values, in raw units.
-    saturated : (H, W) bool
-        Pixels where any channel reached the sensor's clipping level; their radiance is a
-        lower bound.
-    metadata : dict
-        Backend-specific facts (device name, raw file name, settle time, ...), JSON-serialisable.
-    """
-
-    image: np.ndarray
-    exposure: float
-    gain: float = 1.0
-    black_level: float = 0.0
-    saturated: np.ndarray | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.saturated is None:
-            object.__setattr__(self, "saturated", np.zeros(self.image.shape[:2], dtype=bool))
-
-
-@runtime_checkable
-class Camera(Protocol):
-    """A linear camera. ``resolution`` is ``(H, W)``; exposure in seconds, gain linear."""
-
-    resolution: tuple[int, int]
-    exposure: float
-    gain: float
-
-    def capture(self) -> Frame:
-        """Take one frame of whatever the projector shows now."""
-        ...
-
-
-@runtime_checkable
-class Projector(Protocol):
-    """A projector. ``show`` takes float32 ``(Hp, Wp, 3)`` in [0, 1], already passed through
-    the inverse response, and returns once the frame is on the wall."""
-
-    resolution: tuple[int, int]
-    bit_depth: int
-
-    def show(self, image: np.ndarray) -> None:
-        """Display ``image`` and return once it is shown (plus any settle time)."""
-        ...
+__all__ = ["Camera", "Frame", "Projector", "Rig"]
 
 
 class Rig:
@@ -117,7 +59,7 @@ class Rig:
                 if close is not None:
                     close()
 
-    def __enter__(self) -> "Rig":
+    def __enter__(self) -> Rig:
         return self
 
     def __exit__(self, *exc) -> None:

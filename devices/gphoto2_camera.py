@@ -9,7 +9,13 @@ triggers once it is full), and decodes it with rawpy without gamma, auto-brighte
 balance. Trigger, download and delete run under one lock, and every library call has a
 deadline (:class:`devices._common.Watchdog`). Exposure is settable: it snaps to the nearest
 shutter speed the camera offers and :attr:`GPhoto2Camera.exposure` reports the value in use,
-which is what the acquisition Recorder needs for HDR bracketing.
+which is what the acquisition Recorder needs for HDR bracketing (the one HDR merge: this
+backend takes single shots).
+
+Only python-gphoto2's supported API is used (checked against 2.6.4): the camera list through
+``CameraList.items()`` (its iteration is deprecated since 2.6.1), ``file_get`` without a
+``CameraFile`` argument, and a fresh ``Camera`` handle for every session (re-initialising a
+handle after ``exit()`` fails with libgphoto2's virtual USB camera and corrupts its memory).
 
 Rig names: ``"gphoto2"`` (the first camera found), ``"gphoto2:usb:001,004"`` (a port) or
 ``"gphoto2:Nikon DSC D7100"`` (a model as listed by :func:`list_cameras`).
@@ -24,13 +30,14 @@ from pathlib import PurePosixPath
 
 import numpy as np
 
-from devices._common import DeviceTimeout, Watchdog, assemble_rig, call_with_timeout, check_positive
-from devices._linearize import RAW_EXTENSIONS, decode_raw, merge_exposures
+from devices._common import DeviceTimeout, Watchdog, call_with_timeout
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
+from engine.imageio import RAW_EXTENSIONS, decode_raw
 
-__all__ = ["GPhoto2Camera", "list_cameras", "open_camera", "open_rig", "parse_shutter", "probe"]
+__all__ = ["GPhoto2Camera", "list_cameras", "open_camera", "parse_shutter", "probe"]
 
 #: libgphoto2 error codes -> what to tell the user
 ERROR_WORDS = {
@@ -63,8 +70,12 @@ _NAMES = {
 def _gphoto2():
     try:
         import gphoto2
-    except ImportError:
+    except ModuleNotFoundError as exc:
+        if exc.name != "gphoto2":
+            raise DeviceError(f"python-gphoto2 cannot be imported: {exc}") from None
         raise DeviceError("python-gphoto2 is not installed; install the optional extra: pip install 'albedit[gphoto2]'") from None
+    except ImportError as exc:  # installed, but libgphoto2 does not load
+        raise DeviceError(f"python-gphoto2 cannot be imported: {exc}") from None
     return gphoto2
 
 
@@ -118,7 +129,7 @@ def list_cameras(*, gp=None, timeout: float = 10.0) -> list[tuple[str, str]]:
         found = call_with_timeout(gp.Camera.autodetect, timeout=timeout, what="listing cameras", device="gphoto2")
     except gp.GPhoto2Error as exc:
         raise device_error(exc, "listing cameras") from None
-    return [(str(name), str(port)) for name, port in found]
+    return [(str(name), str(port)) for name, port in found.items()]
 
 
 class GPhoto2Camera:
@@ -151,22 +162,13 @@ class GPhoto2Camera:
         Seconds without a capture after which the camera session is released (``exit``); the
         next capture reconnects and re-applies every setting. Some bodies hang on the next
         connection when a session is left open. ``None`` keeps it open until :meth:`close`.
-    hdr_brackets : int
-        When a shot has clipped pixels, take up to this many shorter exposures (each about
-        ``hdr_step`` times shorter, snapped to the camera's shutter speeds) and merge them into
-        one linear frame (:func:`devices._linearize.merge_exposures`). 0 (default) leaves
-        bracketing to the acquisition Recorder (``brackets=``); use one or the other.
-    hdr_step : float
-        Exposure ratio between bracketed shots.
     gp : module, optional
         The ``gphoto2`` module (tests inject a scripted stand-in).
 
     Attributes
     ----------
     last_raw : bytes or None
-        The original RAW file of the last capture, unchanged (the first shot of a bracket).
-    last_raws : list of (str, bytes)
-        Every RAW file of the last capture (name, bytes), bracket included.
+        The original RAW file of the last capture, unchanged.
     settings : dict
         The config values in use (shutter speed text, ISO, aperture, format, target).
     warnings : list of str
@@ -187,8 +189,6 @@ class GPhoto2Camera:
         timeout: float = 30.0,
         delete: bool = True,
         release_after: float | None = 30.0,
-        hdr_brackets: int = 0,
-        hdr_step: float = 4.0,
         gp=None,
     ):
         self._gp = _gphoto2() if gp is None else gp
@@ -198,14 +198,7 @@ class GPhoto2Camera:
         self.warnings: list[str] = []
         self.settings: dict[str, str] = {}
         self.last_raw: bytes | None = None
-        self.last_raws: list[tuple[str, bytes]] = []
         self.release_after = check_positive("release_after", release_after, allow_none=True)
-        if isinstance(hdr_brackets, bool) or not isinstance(hdr_brackets, int) or hdr_brackets < 0:
-            raise InputError(f"hdr_brackets must be an integer >= 0, got {hdr_brackets!r}")
-        self.hdr_brackets = hdr_brackets
-        self.hdr_step = check_positive("hdr_step", hdr_step)
-        if self.hdr_step <= 1:
-            raise InputError(f"hdr_step must be > 1 (each bracketed shot shorter), got {hdr_step!r}")
         self.closed = False
         self._session_open = False
         self._idle_timer: threading.Timer | None = None
@@ -251,6 +244,7 @@ class GPhoto2Camera:
     def _open(self, camera: str | None):
         gp = self._gp
         cam = self._call(gp.Camera, what="creating the camera handle")
+        port = None
         if camera:
             port = camera
             if ":" not in camera or camera.split(":", 1)[0] not in ("usb", "ptpip", "serial", "disk"):
@@ -264,7 +258,7 @@ class GPhoto2Camera:
             self._call(ports.load, what="listing ports")
             index = self._call(ports.lookup_path, port, what=f"finding port {port}")
             self._call(cam.set_port_info, ports[index], what=f"selecting port {port}")
-        self._call(cam.init, what="opening the camera")
+        self._call(cam.init, what=f"opening the camera at {port}" if camera else "opening the camera")
         return cam
 
     def _config(self, key: str):
@@ -280,10 +274,9 @@ class GPhoto2Camera:
             return widget
         raise DeviceError(f"the camera has no {key.replace('_', ' ')} setting (tried {', '.join(_NAMES[key])})")
 
-    def _choices(self, widget) -> list[str]:
-        if hasattr(widget, "get_choices"):  # python-gphoto2 >= 2.0
-            return [str(c) for c in widget.get_choices()]
-        return [str(widget.get_choice(i)) for i in range(widget.count_choices())]
+    @staticmethod
+    def _choices(widget) -> list[str]:
+        return [str(c) for c in widget.get_choices()]
 
     def _write(self, key: str, widget, value: str) -> None:
         widget.set_value(value)
@@ -371,7 +364,7 @@ class GPhoto2Camera:
             self._drop_session()
         if self._session_open:
             return
-        self._call(self._cam.init, what="reconnecting to the camera")
+        self._cam = self._open(self.name or None)  # a fresh handle: never init() one after exit()
         self._session_open = True
         for key, value in list(self.settings.items()):  # some bodies forget settings per session
             self._write(key, self._config(key), value)
@@ -443,43 +436,15 @@ class GPhoto2Camera:
 
     def _decode(self, name: str, data: bytes):
         try:
-            raw = decode_raw(data)
-        except DeviceError as exc:
-            raise DeviceError(f"{name}: {exc}") from None
+            raw = decode_raw(data, name=name)
+        except InputError as exc:
+            raise DeviceError(str(exc)) from None
         h, w = raw.image.shape[:2]
         if self.resolution is None:
             self.resolution = (h, w)
         elif (h, w) != tuple(self.resolution):
             raise DeviceError(f"{name} is {w}x{h} pixels; the camera's images were {self.resolution[1]}x{self.resolution[0]}")
         return raw
-
-    def _bracket(self, raw, shots: list[tuple[str, bytes]]):
-        """Shorter shots until nothing is clipped; returns (image, saturated, exposures) merged."""
-        images = [raw.image / np.float32(self._exposure * self._gain)]
-        masks, times = [raw.saturated], [self._exposure]
-        start_text = self.settings["exposure"]
-        try:
-            for _ in range(self.hdr_brackets):
-                clipped = np.logical_and.reduce(masks)
-                if not clipped.any():
-                    break
-                shorter = [sc for sc in self._shutters if sc[0] < times[-1] * 0.99]
-                if not shorter:
-                    break
-                target = math.log(times[-1] / self.hdr_step)
-                seconds, text = min(shorter, key=lambda sc: abs(math.log(sc[0]) - target))
-                self._write("exposure", self._config("exposure"), text)
-                name, data = self._shoot()
-                shots.append((name, data))
-                short = self._decode(name, data)
-                images.append(short.image / np.float32(seconds * self._gain))
-                masks.append(short.saturated)
-                times.append(seconds)
-        finally:
-            if self.settings.get("exposure") != start_text:
-                self._write("exposure", self._config("exposure"), start_text)
-        image, saturated = merge_exposures(images, masks, times)
-        return image, saturated, times
 
     def capture(self) -> Frame:
         """Trigger, download the RAW file to memory, delete it off the camera, decode linearly.
@@ -489,8 +454,6 @@ class GPhoto2Camera:
         Frame
             ``image`` = linear RAW (black removed, white level = 1) / (exposure * gain);
             ``saturated`` where a photosite clipped; metadata ``raw_name`` and the settings.
-            With ``hdr_brackets`` and clipped pixels, the exposure-weighted merge of the bracket
-            (metadata ``bracket``: the exposures, ``raw_names``).
 
         Raises
         ------
@@ -505,13 +468,8 @@ class GPhoto2Camera:
                 self._idle_timer.cancel()
             try:
                 name, data = self._shoot()
-                shots = [(name, data)]
-                self.last_raw, self.last_raws = data, shots
+                self.last_raw = data
                 raw = self._decode(name, data)
-                if self.hdr_brackets and raw.saturated.any():
-                    image, saturated, times = self._bracket(raw, shots)
-                else:
-                    image, saturated, times = raw.image / np.float32(self._exposure * self._gain), raw.saturated, [self._exposure]
             finally:
                 self._schedule_release()
         meta = {
@@ -521,10 +479,8 @@ class GPhoto2Camera:
             "white_level": raw.white_level,
             "settings": dict(self.settings),
         }
-        if len(times) > 1:
-            meta["bracket"] = [float(t) for t in times]
-            meta["raw_names"] = [n for n, _ in shots]
-        return Frame(image=image.astype(np.float32), exposure=self._exposure, gain=self._gain, black_level=raw.black_level, saturated=saturated, metadata=meta)
+        image = raw.image / np.float32(self._exposure * self._gain)
+        return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=raw.black_level, saturated=raw.saturated, metadata=meta)
 
     def close(self) -> None:
         """Release the camera (``exit``). Idempotent; errors while releasing are ignored."""
@@ -544,28 +500,10 @@ class GPhoto2Camera:
         return f"GPhoto2Camera({self.name!r}, exposure={self._exposure:g}, resolution={self.resolution})"
 
 
-def open_camera(camera: str | None = None, **options) -> GPhoto2Camera:
-    """Open a :class:`GPhoto2Camera` (port or model; ``None`` for the first camera found)."""
-    return GPhoto2Camera(camera, **options)
-
-
-def open_rig(arg: str = "", *, projector=None, settle: float | None = None, projector_timeout: float | None = None, **options):
-    """Open ``"gphoto2"`` / ``"gphoto2:PORT_OR_MODEL"``: a tethered camera plus a projector window.
-
-    Parameters
-    ----------
-    arg : str
-        Port or model; empty for the first camera found.
-    projector : str or Projector, optional
-        ``"qtscreen:NAME_OR_INDEX"`` or a Projector; default the second screen.
-    settle, projector_timeout : float, optional
-        The projector window's settle time and paint timeout in seconds.
-    **options
-        :class:`GPhoto2Camera` options (``exposure``, ``iso``, ``aperture``, ...).
-    """
-    popts = {k: v for k, v in (("settle", settle), ("timeout", projector_timeout)) if v is not None}
-    camera = open_camera(arg or None, **options)
-    return assemble_rig(f"gphoto2:{arg}" if arg else "gphoto2", camera, projector, **popts)
+def open_camera(arg: str = "", **options) -> GPhoto2Camera:
+    """Open ``"gphoto2"`` / ``"gphoto2:PORT_OR_MODEL"``: a :class:`GPhoto2Camera` (the first camera found
+    when ``arg`` is empty); :func:`devices.open_rig` pairs it with a projector."""
+    return GPhoto2Camera(arg or None, **options)
 
 
 def probe(*, gp=None) -> list[Availability]:
@@ -576,8 +514,4 @@ def probe(*, gp=None) -> list[Availability]:
         return [Availability("gphoto2:", False, str(exc))]
     if not cameras:
         return [Availability("gphoto2:", False, "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
-    from devices.qtscreen import second_screen_problem
-
-    problem = second_screen_problem()
-    note = f"; projector: {problem} (pass projector='qtscreen:0')" if problem else ""
-    return [Availability(f"gphoto2:{port}", not problem, f"{model}{note}") for model, port in cameras]
+    return [Availability(f"gphoto2:{port}", True, model) for model, port in cameras]

@@ -10,7 +10,10 @@ Bayer*16 … Bayer*8, RGB16/RGB8), and sets ``ExposureTime`` (µs, validated aga
 camera's range) by their SFNC names. Each capture starts acquisition, fetches one complete
 frame with a deadline (``try_fetch``; harvesters' ``fetch`` can wait forever on incomplete
 buffers), stops again — so every frame is exposed after the call began, never a frame queued
-before a projector change — and demosaics Bayer data with OpenCV.
+before a projector change — and demosaics Bayer data with OpenCV. The producer file is checked
+when it is loaded (harvesters' ``add_file`` accepts an unloadable file silently by default,
+and the camera list then comes back empty). A camera without ``ExposureTime`` delivers
+radiance in relative units (exposure recorded as 1 s, not settable).
 
 Rig name: ``"harvesters:/path/to/producer.cti"``, options ``serial=`` or ``index=`` to choose
 the camera, ``exposure=`` in seconds, ``gain=`` linear.
@@ -18,6 +21,7 @@ the camera, ``exposure=`` in seconds, ``gain=`` linear.
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 import threading
@@ -26,12 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from devices._common import Watchdog, assemble_rig, check_positive
+from devices._common import Watchdog
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
-__all__ = ["HarvestersCamera", "open_camera", "open_rig", "probe"]
+__all__ = ["HarvestersCamera", "open_camera", "probe"]
 
 #: preferred pixel formats, deepest first (all linear when gamma is off)
 PIXEL_FORMATS = tuple(
@@ -44,15 +49,32 @@ PIXEL_FORMATS = tuple(
 _BAYER_TO_CV = {"RG": "COLOR_BayerBG2RGB", "BG": "COLOR_BayerRG2RGB", "GR": "COLOR_BayerGB2RGB", "GB": "COLOR_BayerGR2RGB"}
 
 
-def _harvester_class():
+#: harvesters' own log: it prints every failure with a traceback on stderr by default, and each
+#: failure that matters reaches the user as a one-line DeviceError instead
+LIBRARY_LOG = logging.getLogger(__name__ + ".library")
+LIBRARY_LOG.propagate = False
+LIBRARY_LOG.addHandler(logging.NullHandler())
+
+
+def _harvesters_core():
     try:
-        from harvesters.core import Harvester
-    except ImportError:
+        import harvesters.core as core
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("harvesters", "harvesters.core", "genicam"):
+            raise DeviceError(f"harvesters cannot be imported: {exc}") from None
         raise DeviceError(
             "harvesters is not installed; install the optional extra: pip install 'albedit[harvesters]' "
             "(and the camera maker's GenTL producer, a .cti file)"
         ) from None
-    return Harvester
+    except ImportError as exc:  # installed, but a binary part does not load
+        raise DeviceError(f"harvesters cannot be imported: {exc}") from None
+    return core
+
+
+def _new_harvester():
+    """A ``Harvester`` that logs into :data:`LIBRARY_LOG` (its supported ``config`` parameter)."""
+    core = _harvesters_core()
+    return core.Harvester(config=core.ParameterSet({core.ParameterKey.LOGGER: LIBRARY_LOG}))
 
 
 def _bits(pixel_format: str) -> int:
@@ -152,7 +174,6 @@ class HarvestersCamera:
         cti_path = Path(cti)
         if not cti_path.is_file():
             raise DeviceError(f"no GenTL producer file at {str(cti_path)!r} (the camera maker's .cti)")
-        Harvester = _harvester_class()
         self.timeout = check_positive("timeout", timeout)
         self.black_level = float(black_level)
         self.warnings: list[str] = []
@@ -160,9 +181,9 @@ class HarvestersCamera:
         self._lock = threading.Lock()
         self._dog = Watchdog("GenICam camera")
         self._ia = None
-        self._h = Harvester()
+        self._h = _new_harvester()
         try:
-            self._call(self._h.add_file, str(cti_path), what="loading the GenTL producer")
+            self._call(self._h.add_file, str(cti_path), True, True, what="loading the GenTL producer")
             self._call(self._h.update, what="listing cameras")
             found = list(self._h.device_info_list)
             if not found:
@@ -177,6 +198,8 @@ class HarvestersCamera:
             self._optional("GammaEnable", False, "gamma could not be switched off: check the camera's output is linear")
             self.pixel_format = self._choose_format(pixel_format)
             self.resolution = (int(self._nodes.Height.value), int(self._nodes.Width.value))
+            if self._node("ExposureTime") is None:
+                self.warnings.append("the camera has no ExposureTime feature: radiance is in relative units (exposure recorded as 1 s)")
             if exposure is not None:
                 self.exposure = exposure
             if gain is not None:
@@ -237,16 +260,22 @@ class HarvestersCamera:
         return choice
 
     @property
+    def node_map(self):
+        """The camera's GenICam features by SFNC name, for the ones Albedit does not set itself."""
+        return self._nodes
+
+    @property
     def exposure(self) -> float:
-        """Exposure time in seconds, as the camera reports it."""
-        return float(self._nodes.ExposureTime.value) * 1e-6
+        """Exposure time in seconds, as the camera reports it (1 without an ExposureTime feature)."""
+        node = self._node("ExposureTime")
+        return 1.0 if node is None else float(node.value) * 1e-6
 
     @exposure.setter
     def exposure(self, seconds: float) -> None:
         seconds = check_positive("exposure", seconds)
         node = self._node("ExposureTime")
         if node is None:
-            raise DeviceError("the camera has no ExposureTime feature")
+            raise DeviceError("the camera has no ExposureTime feature: its exposure cannot be set from here")
         lo, hi = float(node.min) * 1e-6, float(node.max) * 1e-6
         if not lo <= seconds <= hi:
             raise InputError(f"exposure {seconds:g} s is outside the camera's range {lo:g} .. {hi:g} s")
@@ -275,6 +304,9 @@ class HarvestersCamera:
             self._write("Gain", db)
 
     # -- capturing ------------------------------------------------------------------------
+    def _try_fetch(self, seconds: float):
+        return self._ia.try_fetch(timeout=seconds)
+
     def _fetch_one(self):
         deadline = time.monotonic() + self.timeout
         while True:
@@ -284,7 +316,7 @@ class HarvestersCamera:
                     f"no complete frame from the camera within {self.timeout:g} s (unplugged, "
                     "a trigger mode left on, or too little network bandwidth?)"
                 )
-            buffer = self._call(lambda: self._ia.try_fetch(timeout=min(left, 1.0)), what="fetching a frame")
+            buffer = self._call(self._try_fetch, min(left, 1.0), what="fetching a frame")
             if buffer is None:
                 continue
             try:
@@ -344,38 +376,32 @@ class HarvestersCamera:
         return f"HarvestersCamera(resolution={getattr(self, 'resolution', None)}, pixel_format={getattr(self, 'pixel_format', None)!r})"
 
 
-def open_camera(cti, **options) -> HarvestersCamera:
-    """Open a :class:`HarvestersCamera` through the GenTL producer ``cti``."""
-    return HarvestersCamera(cti, **options)
-
-
-def open_rig(arg: str = "", *, projector=None, settle: float | None = None, projector_timeout: float | None = None, **options):
-    """Open ``"harvesters:/path/to/producer.cti"``: a GenICam camera plus a projector window.
+def open_camera(arg="", **options) -> HarvestersCamera:
+    """Open ``"harvesters:/path/to/producer.cti"``: a :class:`HarvestersCamera` through that GenTL
+    producer (:func:`devices.open_rig` pairs it with a projector).
 
     Raises
     ------
     InputError
         No producer file given.
     DeviceError
-        harvesters missing, no camera, or the projector cannot open.
+        harvesters missing, an unusable producer, or no camera.
     """
-    if not arg:
+    if not str(arg):
         raise InputError("harvesters needs the GenTL producer: open_rig('harvesters:/path/to/producer.cti')")
-    popts = {k: v for k, v in (("settle", settle), ("timeout", projector_timeout)) if v is not None}
-    camera = open_camera(arg, **options)
-    return assemble_rig(f"harvesters:{arg}", camera, projector, **popts)
+    return HarvestersCamera(arg, **options)
 
 
 def probe() -> list[Availability]:
-    """Whether harvesters is installed (cameras are listed only through a given producer file).
+    """Whether harvesters can be imported (cameras are listed only through a given producer file).
 
     Examples
     --------
     >>> probe()[0].name
     'harvesters:PRODUCER.cti'
     """
-    import importlib.util
-
-    if importlib.util.find_spec("harvesters") is None:
-        return [Availability("harvesters:PRODUCER.cti", False, "harvesters is not installed (pip install 'albedit[harvesters]')")]
+    try:
+        _harvesters_core()
+    except DeviceError as exc:
+        return [Availability("harvesters:PRODUCER.cti", False, str(exc))]
     return [Availability("harvesters:PRODUCER.cti", True, "GenICam camera through the maker's GenTL producer (.cti)")]

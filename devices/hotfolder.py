@@ -4,8 +4,8 @@ Many camera makers ship tethering programs (Canon EOS Utility, Nikon Camera Cont
 Capture One, Sony Imaging Edge) that save each shot into a folder. This backend watches that
 folder: :meth:`HotFolderCamera.capture` optionally runs a trigger command, then waits for the
 next *new* file, waits until it is complete (same size on two polls and decodable), decodes it
-linearly (RAW through rawpy with :func:`engine.imageio.raw_postprocess_options`; TIFF, EXR and
-PNG through :func:`engine.imageio.read_image`) and returns linear radiance.
+linearly (RAW through :func:`engine.imageio.decode_raw`; TIFF, EXR and PNG through
+:func:`engine.imageio.read_image`) and returns linear radiance.
 
 Rig name: ``"hotfolder:/path/to/folder"``, e.g.
 ``devices.open_rig("hotfolder:/data/tether", projector="qtscreen:1", resolution=(4000, 6000),
@@ -18,18 +18,18 @@ import os
 import subprocess
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
-from devices._common import assemble_rig, check_positive
-from devices._linearize import RAW_EXTENSIONS, decode_raw
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
+from engine.imageio import RAW_EXTENSIONS, decode_raw, image_info, read_image
 
-__all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_camera", "open_rig", "probe"]
+__all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_camera", "probe"]
 
 #: non-RAW files the folder may receive (JPEG is display-encoded and lossy: not accepted)
 IMAGE_EXTENSIONS = frozenset({".tif", ".tiff", ".exr", ".png"})
@@ -65,7 +65,9 @@ class HotFolderCamera:
         rejected as unreadable (a writer pausing longer than this would be misread as corrupt).
     trigger : list of str, optional
         Command run (no shell) at the start of each capture to fire the camera, e.g.
-        ``["gphoto2", "--trigger-capture"]``; a non-zero exit is a DeviceError.
+        ``["gphoto2", "--trigger-capture"]``; a non-zero exit is a DeviceError. With a trigger,
+        a new file that arrives before the camera is fired is refused (the camera fired on its
+        own, or twice: that file shows another pattern than the one now projected).
     trigger_timeout : float
         Seconds the trigger command may run.
     extensions : iterable of str, optional
@@ -74,7 +76,7 @@ class HotFolderCamera:
     srgb : bool, optional
         Passed to :func:`engine.imageio.read_image` for TIFF/PNG (``None``: decide by format).
     clock, sleep : callable, optional
-        ``time.monotonic`` and ``time.sleep`` replacements (tests).
+        ``time.monotonic`` and ``time.sleep`` replacements (tests); see also :meth:`set_idle`.
 
     Attributes
     ----------
@@ -134,6 +136,14 @@ class HotFolderCamera:
         self.last_path: Path | None = None
         self.closed = False
 
+    def set_idle(self, wait: Callable[[float], None]) -> None:
+        """Wait between looks at the folder with ``wait(seconds)`` instead of sleeping.
+
+        A rig pairs this with its projector's ``idle`` (:func:`devices.registry.pair`), so a
+        projector window stays responsive while the command line waits here on its UI thread.
+        """
+        self._sleep = wait
+
     # -- exposure: recorded, not controlled ----------------------------------------------
     @property
     def exposure(self) -> float:
@@ -189,8 +199,6 @@ class HotFolderCamera:
         if path.suffix.lower() in RAW_EXTENSIONS:
             raw = decode_raw(path)
             return raw.image, raw.saturated, raw.black_level, {"raw_name": path.name, "white_level": raw.white_level}
-        from engine.imageio import image_info, read_image
-
         info = image_info(path)
         image = read_image(path, srgb=self.srgb)
         if image.shape[2] == 1:
@@ -256,6 +264,15 @@ class HotFolderCamera:
             start = self._clock()
             deadline = start + self.timeout
             if self.trigger:
+                early = self._new_files()
+                if early:
+                    self._seen.update(p.name for p in early)
+                    names = ", ".join(repr(p.name) for p in early)
+                    raise DeviceError(
+                        f"hot folder {str(self.folder)!r} received {names} before the camera was triggered: a frame taken "
+                        "for an earlier pattern (the camera fired twice, or on its own) or written by another program; "
+                        "it is left in the folder and not used: check the camera's drive mode, then run again"
+                    )
                 self._run_trigger()
             while True:
                 fresh = self._new_files()
@@ -290,43 +307,22 @@ class HotFolderCamera:
         return f"HotFolderCamera({str(self.folder)!r}, resolution={self.resolution})"
 
 
-def open_camera(folder, **options) -> HotFolderCamera:
-    """Open a :class:`HotFolderCamera` on ``folder`` (to pair with any projector in a Rig)."""
-    return HotFolderCamera(folder, **options)
-
-
-def open_rig(arg: str = "", *, projector=None, settle: float | None = None, projector_timeout: float | None = None, **options):
-    """Open ``"hotfolder:FOLDER"``: a hot-folder camera plus a projector window.
-
-    Parameters
-    ----------
-    arg : str
-        The watched folder.
-    projector : str or Projector, optional
-        ``"qtscreen:NAME_OR_INDEX"`` or a Projector; default the second screen.
-    settle, projector_timeout : float, optional
-        The projector window's settle time and paint timeout in seconds.
-    **options
-        :class:`HotFolderCamera` options (``resolution``, ``exposure``, ``trigger``, ...).
+def open_camera(arg="", **options) -> HotFolderCamera:
+    """Open ``"hotfolder:FOLDER"``: a :class:`HotFolderCamera` on the folder (:func:`devices.open_rig`
+    pairs it with a projector).
 
     Raises
     ------
     InputError
         No folder given, or bad options.
     DeviceError
-        The folder does not exist, or the projector cannot open.
+        The folder does not exist.
     """
-    if not arg:
+    if not str(arg):
         raise InputError("hotfolder needs a folder: open_rig('hotfolder:/path/to/folder')")
-    popts = {k: v for k, v in (("settle", settle), ("timeout", projector_timeout)) if v is not None}
-    camera = open_camera(arg, **options)
-    return assemble_rig(f"hotfolder:{arg}", camera, projector, **popts)
+    return HotFolderCamera(arg, **options)
 
 
 def probe() -> list[Availability]:
-    """The hot folder needs only a folder the tethering software writes to (and a projector screen)."""
-    from devices.qtscreen import second_screen_problem
-
-    problem = second_screen_problem()
-    note = f"; projector: {problem} (pass projector='qtscreen:0')" if problem else ""
-    return [Availability("hotfolder:FOLDER", not problem, f"captures saved into FOLDER by the camera's tethering software{note}")]
+    """The hot folder needs only a folder the tethering software writes to."""
+    return [Availability("hotfolder:FOLDER", True, "captures saved into FOLDER by the camera's tethering software")]

@@ -23,13 +23,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from devices._common import Watchdog, assemble_rig, check_positive
+from devices._common import Watchdog
 from devices._linearize import SATURATION_FRACTION, ResponseCurve, calibrate_response, response_curve
 from devices.base import Frame
 from devices.registry import Availability
+from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
 
-__all__ = ["OpenCVCamera", "open_camera", "open_rig", "probe"]
+__all__ = ["OpenCVCamera", "open_camera", "probe"]
 
 # CAP_PROP_AUTO_EXPOSURE value meaning "manual", and CAP_PROP_EXPOSURE units, per backend
 _MANUAL_EXPOSURE = {"V4L2": 1.0, "DSHOW": 0.25, "MSMF": 0.25}
@@ -49,6 +50,20 @@ def _exposure_from_driver(backend: str, value: float) -> float | None:
     if backend in ("DSHOW", "MSMF"):
         return 2.0**value
     return None
+
+
+def _quietly_open(*args) -> cv2.VideoCapture:
+    """``cv2.VideoCapture(*args)`` without OpenCV's warnings about each backend it tried.
+
+    Opening a missing camera makes every backend OpenCV tries print a warning on stderr; the
+    DeviceError raised instead says what is wrong in one line.
+    """
+    logging = cv2.utils.logging
+    previous = logging.setLogLevel(logging.LOG_LEVEL_ERROR)
+    try:
+        return cv2.VideoCapture(*args)
+    finally:
+        logging.setLogLevel(previous)
 
 
 def _parse_source(source) -> tuple[int | str, int | None, bool]:
@@ -133,7 +148,7 @@ class OpenCVCamera:
         self.closed = False
         what = "opening the camera" if self.is_device else "opening the file"
         args = (target,) if api is None else (target, api)
-        self._cap = self._dog.call(cv2.VideoCapture, *args, timeout=self.timeout, what=what)
+        self._cap = self._dog.call(_quietly_open, *args, timeout=self.timeout, what=what)
         if not self._cap.isOpened():
             if self.is_device:
                 raise DeviceError(f"no camera at index {target} (not attached, or in use by another program)")
@@ -350,28 +365,10 @@ class OpenCVCamera:
         return f"OpenCVCamera({self.source!r}, resolution={self.resolution}, response={self.response.name!r})"
 
 
-def open_camera(source=0, **options) -> OpenCVCamera:
-    """Open an :class:`OpenCVCamera` (a camera index, video file or image-sequence pattern)."""
-    return OpenCVCamera(source, **options)
-
-
-def open_rig(arg: str = "", *, projector=None, settle: float | None = None, projector_timeout: float | None = None, **options):
-    """Open ``"opencv:ARG"``: this camera plus a projector window.
-
-    Parameters
-    ----------
-    arg : str
-        Camera index (default 0), video file or image-sequence pattern.
-    projector : str or Projector, optional
-        ``"qtscreen:NAME_OR_INDEX"``; default the second screen.
-    settle, projector_timeout : float, optional
-        The projector's settle time and paint timeout in seconds.
-    **options
-        :class:`OpenCVCamera` options.
-    """
-    popts = {k: v for k, v in (("settle", settle), ("timeout", projector_timeout)) if v is not None}
-    camera = open_camera(arg if arg else 0, **options)
-    return assemble_rig(f"opencv:{arg or 0}", camera, projector, **popts)
+def open_camera(arg="", **options) -> OpenCVCamera:
+    """Open ``"opencv:ARG"``: an :class:`OpenCVCamera` on a camera index (default 0), a video file or an
+    image-sequence pattern (:func:`devices.open_rig` pairs it with a projector)."""
+    return OpenCVCamera(arg if arg not in ("", None) else 0, **options)
 
 
 def _video_devices() -> list[int]:
@@ -386,13 +383,9 @@ def _video_devices() -> list[int]:
 
 
 def probe() -> list[Availability]:
-    """Cameras OpenCV may open (``/dev/video*`` on Linux), and whether a projector screen is there."""
-    from devices.qtscreen import second_screen_problem
-
-    problem = second_screen_problem()
-    note = f"; projector: {problem} (pass projector='qtscreen:0')" if problem else ""
-    out = [Availability(f"opencv:{i}", not problem, f"video device {i}{note}") for i in _video_devices()]
+    """Cameras OpenCV may open (``/dev/video*`` on Linux), and files."""
+    out = [Availability(f"opencv:{i}", True, f"video device {i}") for i in _video_devices()]
     if not out:
         out.append(Availability("opencv:0", False, "no camera attached (no /dev/video* device)"))
-    out.append(Availability("opencv:FILE", not problem, "a video file or image sequence such as opencv:frames/f_%04d.png" + note))
+    out.append(Availability("opencv:FILE", True, "a video file or image sequence such as opencv:frames/f_%04d.png"))
     return out

@@ -22,10 +22,11 @@ import os
 import sys
 import threading
 import time
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
-from PySide6.QtCore import QCoreApplication, QEventLoop, QPoint, QRect, Qt, QThread, Signal, Slot
+from PySide6.QtCore import QCoreApplication, QEventLoop, QPoint, QRect, Qt, QThread, QTimer, Signal, Slot
 from PySide6.QtGui import QColor, QFont, QGuiApplication, QImage, QPainter
 from PySide6.QtWidgets import QApplication, QWidget
 
@@ -35,11 +36,11 @@ from engine.errors import DeviceError, InputError
 __all__ = [
     "QtScreenProjector",
     "ScreenInfo",
+    "default_problem",
     "identify_pattern",
     "list_screens",
     "open_projector",
     "probe",
-    "projector_from_spec",
 ]
 
 
@@ -199,6 +200,7 @@ class _ProjectorWindow(QWidget):
 
     present_requested = Signal()
     close_requested = Signal()
+    call_requested = Signal()
 
     def __init__(self) -> None:
         flags = Qt.WindowType.Window | Qt.WindowType.FramelessWindowHint | Qt.WindowType.WindowStaysOnTopHint
@@ -212,8 +214,17 @@ class _ProjectorWindow(QWidget):
         self._lock = threading.Lock()
         self._pending: tuple[int, QImage, threading.Event] | None = None
         self._deferred: tuple[int, threading.Event] | None = None
+        self._calls: list[tuple[Callable[[], object], dict, threading.Event]] = []
+        self.closing = False  # set by the projector before it closes the window itself
+        self.on_closed: Callable[[], None] | None = None
         self.present_requested.connect(self._present_pending, Qt.ConnectionType.QueuedConnection)
         self.close_requested.connect(self._close_now, Qt.ConnectionType.QueuedConnection)
+        self.call_requested.connect(self._run_calls, Qt.ConnectionType.QueuedConnection)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        if not self.closing and self.on_closed is not None:
+            self.on_closed()  # closed by the user or the window manager, not by the projector
+        super().closeEvent(event)
 
     def paintEvent(self, event) -> None:  # noqa: N802 (Qt name)
         painter = QPainter(self)
@@ -243,14 +254,33 @@ class _ProjectorWindow(QWidget):
             self._pending = (serial, image, done)
         self.present_requested.emit()
 
+    def request_call(self, fn: Callable[[], object], box: dict, done: threading.Event) -> None:
+        """From a worker thread: run ``fn()`` on the UI thread, its result or error into ``box``."""
+        with self._lock:
+            self._calls.append((fn, box, done))
+        self.call_requested.emit()
+
     def wake_waiters(self) -> None:
-        """Release any show() waiting for a paint (its caller then checks why)."""
+        """Release any show() or call waiting for the UI thread (its caller then checks why)."""
         with self._lock:
             pending, self._pending = self._pending, None
+            calls, self._calls = self._calls, []
         deferred, self._deferred = self._deferred, None
-        for item in (pending, deferred):
+        for item in (pending, deferred, *calls):
             if item is not None:
                 item[-1].set()
+
+    @Slot()
+    def _run_calls(self) -> None:
+        with self._lock:
+            calls, self._calls = self._calls, []
+        for fn, box, done in calls:
+            try:
+                box["value"] = fn()
+            except Exception as exc:  # noqa: BLE001 - handed to the waiting thread, never out of the slot
+                box["error"] = exc
+            finally:
+                done.set()
 
     @Slot()
     def _present_pending(self) -> None:
@@ -261,6 +291,7 @@ class _ProjectorWindow(QWidget):
 
     @Slot()
     def _close_now(self) -> None:
+        self.closing = True
         self.close()
         self.deleteLater()
 
@@ -278,7 +309,7 @@ class QtScreenProjector:
     timeout : float
         Seconds to wait for the UI thread to paint a frame before raising DeviceError.
     sleep : callable, optional
-        ``sleep(seconds)`` used for the settle wait (default ``time.sleep``; tests record it).
+        ``sleep(seconds)`` used for the settle wait (default :meth:`idle`; tests record it).
 
     Attributes
     ----------
@@ -311,7 +342,8 @@ class QtScreenProjector:
         self.screen_name = qscreen.name()
         self.resolution = _device_size(qscreen)
         self.settle, self.timeout = settle, timeout
-        self._sleep = time.sleep if sleep is None else sleep
+        self._sleep = self.idle if sleep is None else sleep
+        self._qscreen = qscreen
         self._dpr = float(qscreen.devicePixelRatio())
         self._lost: str | None = None
         self._callbacks: list[Callable[[], None]] = []
@@ -320,6 +352,7 @@ class QtScreenProjector:
         self.last_shown: np.ndarray | None = None
         self.closed = False
         self.window = _ProjectorWindow()
+        self.window.on_closed = self._on_window_closed
         self.window.setScreen(qscreen)  # right before showFullScreen: Wayland ignores later moves
         self.window.setGeometry(qscreen.geometry())
         self.window.showFullScreen()
@@ -334,6 +367,37 @@ class QtScreenProjector:
                 "reconnect the projector and open the rig again"
             )
             self.window.wake_waiters()  # a show() waiting for a paint fails now, not at its timeout
+
+    def _on_window_closed(self) -> None:
+        self._lost = (
+            f"the projector window on {self.screen_name!r} was closed (by the user or the window manager) "
+            "while the rig was open; open the rig again (captures taken so far are kept)"
+        )
+        self.window.wake_waiters()
+
+    def idle(self, seconds: float) -> None:
+        """Wait ``seconds``; on the UI thread, keep processing its events meanwhile.
+
+        A projector window whose thread sleeps cannot repaint and is reported "not responding"
+        by desktop shells after a few seconds; cameras that wait on the UI thread (a hot
+        folder polled by the command line) wait through this instead (see
+        :func:`devices.registry.pair`).
+        """
+        seconds = float(seconds)
+        if seconds <= 0:
+            return
+        if not _on_ui_thread():
+            time.sleep(seconds)
+            return
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            loop, timer = QEventLoop(), QTimer()
+            timer.setSingleShot(True)
+            timer.setTimerType(Qt.TimerType.PreciseTimer)
+            timer.timeout.connect(loop.quit)
+            timer.start(max(1, int(np.ceil(left * 1000))))
+            loop.exec()
+            timer.stop()
 
     def add_shown_callback(self, callback: Callable[[], None]) -> None:
         """Call ``callback()`` after each new frame is painted (before the settle wait).
@@ -420,16 +484,84 @@ class QtScreenProjector:
         self.show(identify_pattern(self.resolution, label=f"{self.screen_name}  {wp}x{hp}"))
 
     def grab(self) -> np.ndarray:
-        """What the window shows now, as (Hp, Wp, 3) uint8 (UI thread only; for checks and tests)."""
+        """What the window paints now, as (Hp, Wp, 3) uint8 (UI thread only; for checks and tests)."""
         if not _on_ui_thread():
             raise DeviceError("grab() must be called on the Qt UI thread")
         return _rgb_array(self.window.grab().toImage())
+
+    def grab_screen(self) -> np.ndarray:
+        """What the projector's screen displays now, as (Hp, Wp, 3) uint8; from any thread.
+
+        This is what a camera looking at the screen sees: the window's content as the platform
+        displays it (its backing store, not a fresh paint) where the window is, black where it
+        does not cover the screen. From a worker thread the grab runs on the UI thread (whose
+        event loop must be running, or which must be waiting in :meth:`idle`).
+
+        Raises
+        ------
+        DeviceError
+            The screen was disconnected or the window closed, the UI thread did not answer
+            within ``timeout``, or the platform's grab is not in device pixels (Qt's offscreen
+            platform at a device-pixel ratio other than 1).
+
+        Notes
+        -----
+        The window is grabbed by its id: Qt's offscreen platform grabs a whole screen
+        (``grabWindow(0)``) from the origin of the desktop rather than of that screen, which
+        gives an uninitialised picture for a screen that is not at (0, 0).
+        """
+        if self._lost:
+            raise DeviceError(self._lost)
+        return self.call_on_ui(self._grab_screen_now, what=f"grab screen {self.screen_name!r}")
+
+    def _grab_screen_now(self) -> np.ndarray:
+        if self._lost:
+            raise DeviceError(self._lost)
+        pixmap = self._qscreen.grabWindow(self.window.winId())
+        content = _rgb_array(pixmap.toImage())
+        win, scr = self.window.geometry(), self._qscreen.geometry()
+        expected = (round(win.height() * self._dpr), round(win.width() * self._dpr))
+        if content.shape[:2] != expected:
+            raise DeviceError(
+                f"the grab of the projector window on {self.screen_name!r} is {content.shape[1]}x{content.shape[0]} "
+                f"pixels, not its {expected[1]}x{expected[0]} device pixels (device-pixel ratio {self._dpr:g})"
+            )
+        hp, wp = self.resolution
+        screen = np.zeros((hp, wp, 3), np.uint8)
+        y0, x0 = round((win.y() - scr.y()) * self._dpr), round((win.x() - scr.x()) * self._dpr)
+        ys, xs = slice(max(y0, 0), min(y0 + expected[0], hp)), slice(max(x0, 0), min(x0 + expected[1], wp))
+        if ys.start < ys.stop and xs.start < xs.stop:
+            screen[ys, xs] = content[ys.start - y0 : ys.stop - y0, xs.start - x0 : xs.stop - x0]
+        return screen
+
+    def call_on_ui(self, fn: Callable[[], object], *, what: str = "answer"):
+        """Run ``fn()`` on the UI thread (directly when called there) and return its result.
+
+        Raises
+        ------
+        DeviceError
+            The UI thread did not run it within ``timeout`` (its event loop is blocked), or the
+            screen was lost meanwhile; ``fn``'s own exceptions propagate.
+        """
+        if _on_ui_thread():
+            return fn()
+        box: dict = {}
+        done = threading.Event()
+        self.window.request_call(fn, box, done)
+        if not done.wait(self.timeout):
+            raise DeviceError(f"the UI thread did not {what} within {self.timeout:g} s; is its event loop blocked?")
+        if "error" in box:
+            raise box["error"]
+        if "value" not in box:  # woken without running: the screen or window is gone
+            raise DeviceError(self._lost or f"the UI thread did not {what}")
+        return box["value"]
 
     def close(self) -> None:
         """Close the window. Idempotent; safe from any thread."""
         if self.closed:
             return
         self.closed = True
+        self.window.closing = True
         app = QCoreApplication.instance()
         if app is not None:
             try:
@@ -477,26 +609,8 @@ def open_projector(screen: int | str | None = None, *, settle: float = 0.1, time
     return QtScreenProjector(screen, settle=settle, timeout=timeout, sleep=sleep)
 
 
-def projector_from_spec(spec: str | None, **options) -> QtScreenProjector:
-    """Open the projector a rig option names: ``None``/``"qtscreen"`` (second screen) or ``"qtscreen:X"``.
-
-    Examples
-    --------
-    >>> projector_from_spec("vga:1")
-    Traceback (most recent call last):
-    ...
-    engine.errors.InputError: projector must be 'qtscreen:NAME_OR_INDEX' (or None for the second screen), got 'vga:1'
-    """
-    if spec is None:
-        return open_projector(None, **options)
-    kind, _, arg = str(spec).partition(":")
-    if kind != "qtscreen":
-        raise InputError(f"projector must be 'qtscreen:NAME_OR_INDEX' (or None for the second screen), got {spec!r}")
-    return open_projector(arg if arg else None, **options)
-
-
-def second_screen_problem() -> str:
-    """Why the default projector (second screen) cannot open here, or ``""`` if it can."""
+def default_problem() -> str:
+    """Why the default projector (a window on the second screen) cannot open here, or ``""`` if it can."""
     try:
         _application()
     except DeviceError as exc:

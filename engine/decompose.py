@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_choice, check_float_image, check_kappa, check_mask, check_order, float_dtype
+from engine.checks import check_choice, check_float_image, check_kappa, check_mask, check_order, float_dtype
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER, outside_matrix, transport_matrix
 from engine.progress import Progress, ShouldStop, checkpoint, report
@@ -78,7 +78,7 @@ class Decomposition:
         comps = self.components[: self.outside_order]
         return np.where(self.target[None, :, :, None], 0, comps).astype(self.components.dtype)
 
-    def crop(self, y0: int, y1: int, x0: int, x1: int) -> "Decomposition":
+    def crop(self, y0: int, y1: int, x0: int, x1: int) -> Decomposition:
         """The rectangle ``[y0:y1, x0:x1]`` as a decomposition of its own (views, no copy).
 
         Recoloring is per pixel (Eq. 3–4), so recoloring the crop equals cropping the recolor.
@@ -89,7 +89,7 @@ class Decomposition:
                              self.constraint, self.unreached_light, residual)
 
     @classmethod
-    def from_components(cls, inside, outside, unreached, target, *, constraint: str = "none") -> "Decomposition":
+    def from_components(cls, inside, outside, unreached, target, *, constraint: str = "none") -> Decomposition:
         """Build a decomposition from separate inside/outside components (e.g. ground truth).
 
         Parameters

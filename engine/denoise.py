@@ -18,7 +18,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 import cv2
 import numpy as np
 
-from engine._checks import check_float_image
+from engine.checks import check_float_image
 from engine.decompose import Decomposition
 from engine.errors import InputError
 from engine.progress import Progress, ShouldStop, checkpoint, report

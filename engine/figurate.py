@@ -12,7 +12,7 @@ from math import comb
 
 import numpy as np
 
-from engine._checks import check_order
+from engine.checks import check_order
 from engine.errors import InputError
 
 #: Highest order accepted anywhere: cond(M) grows ~13x per order (K = 8: 2e7), beyond which

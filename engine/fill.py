@@ -15,7 +15,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from engine._checks import check_float_image, check_mask
+from engine.checks import check_float_image, check_mask
 from engine.decompose import Decomposition
 from engine.errors import InputError
 

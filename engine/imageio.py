@@ -9,7 +9,9 @@ linear float32 ``(H, W, C)``:
   every tool writes), 16-bit TIFFs as linear (what RAW converters and scientific cameras
   write). ``srgb=True`` / ``srgb=False`` overrides the guess;
 - camera RAW files are decoded linearly through rawpy (no gamma, no auto-brightness, no
-  white balance, camera colour space), black level removed and scaled so the white level is 1.
+  white balance, camera colour space), black level removed and scaled so the white level is 1,
+  in the sensor's orientation (:func:`decode_raw`, the one RAW decoder of Albedit: files a
+  camera backend downloads or finds in a hot folder are decoded by it too).
 
 Every write is atomic (:func:`atomic_write`: a temporary file in the same folder, then
 ``os.replace``), so a crash never leaves a half-written image under the final name.
@@ -27,21 +29,24 @@ import io
 import json
 import os
 import secrets
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
 import rawpy
 
-from engine._checks import check_float_image
+from engine.checks import check_float_image
 from engine.errors import InputError
 
 __all__ = [
     "RAW_EXTENSIONS",
     "ImageInfo",
+    "RawDecode",
     "atomic_write",
+    "decode_raw",
     "image_info",
     "raw_postprocess_options",
     "read_image",
@@ -53,8 +58,12 @@ __all__ = [
     "write_image",
 ]
 
-#: Camera RAW extensions decoded through rawpy (lower case, with the dot).
-RAW_EXTENSIONS = frozenset({".nef", ".cr2", ".cr3", ".arw", ".dng", ".raf", ".orf", ".rw2"})
+#: Camera RAW extensions decoded through rawpy/LibRaw (lower case, with the dot): the one list
+#: every reader of RAW files uses (read_image, the hot folder, tethered downloads, file dialogs).
+RAW_EXTENSIONS = frozenset(
+    ".3fr .arw .cr2 .cr3 .crw .dcr .dng .erf .iiq .k25 .kdc .mef .mos .mrw .nef .nrw .orf .pef "
+    ".raf .raw .rw2 .rwl .sr2 .srf .srw .x3f".split()
+)
 
 # extension -> (OpenImageIO format name, default "is sRGB-encoded" for 8-bit, for 16-bit data)
 _READ_FORMATS = {
@@ -368,7 +377,7 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
     ----------
     path : str or Path
         ``.exr``, ``.tif``/``.tiff``, ``.png``, ``.jpg``/``.jpeg``, or a camera RAW file
-        (``.nef .cr2 .cr3 .arw .dng .raf .orf .rw2``).
+        (any of :data:`RAW_EXTENSIONS`).
     srgb : bool or None, keyword-only
         Whether the stored values are sRGB-encoded and must be decoded to linear.
         ``None`` (default) decides by format: PNG, JPEG and 8-bit TIFF are sRGB-encoded;
@@ -390,7 +399,7 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
 
     Notes
     -----
-    RAW files are decoded as in :func:`read_raw_bytes`.
+    RAW files are decoded by :func:`decode_raw` (sensor orientation).
 
     Examples
     --------
@@ -405,11 +414,7 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
     if ext in RAW_EXTENSIONS:
         if srgb:
             raise InputError(f"{path}: srgb=True makes no sense for a RAW file, which is decoded linearly")
-        try:
-            with open(path, "rb") as fh:
-                return _decode_raw(fh, str(path))
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read file: {exc}") from exc
+        return decode_raw(path).image
     inp = _oiio_open(path)
     try:
         spec = inp.spec()
@@ -447,12 +452,13 @@ def raw_postprocess_options() -> dict[str, Any]:
         ``output_bps=16``, ``output_color=rawpy.ColorSpace.raw`` (camera primaries, no matrix),
         ``user_wb=[1, 1, 1, 1]`` (no white balance), ``adjust_maximum_thr=0.0`` (LibRaw's
         default 0.75 rescales each frame by its own maximum, which breaks linearity between
-        captures).
+        captures), ``user_flip=0`` (the sensor's orientation: a camera's orientation tag can
+        change between two shots of a fixed rig, its pixel grid cannot).
 
     Examples
     --------
-    >>> raw_postprocess_options()["adjust_maximum_thr"]
-    0.0
+    >>> raw_postprocess_options()["adjust_maximum_thr"], raw_postprocess_options()["user_flip"]
+    (0.0, 0)
     """
     return {
         "gamma": (1, 1),
@@ -461,22 +467,133 @@ def raw_postprocess_options() -> dict[str, Any]:
         "output_color": rawpy.ColorSpace.raw,
         "user_wb": [1.0, 1.0, 1.0, 1.0],
         "adjust_maximum_thr": 0.0,
+        "user_flip": 0,
     }
 
 
-def _decode_raw(source, label: str) -> np.ndarray:
+@dataclass(frozen=True)
+class RawDecode:
+    """A camera RAW file decoded linearly (see :func:`decode_raw`).
+
+    Attributes
+    ----------
+    image : (H, W, 3) float32
+        Camera RGB, black level removed, 1.0 = white level; no white balance, no gamma,
+        sensor orientation.
+    saturated : (H, W) bool
+        Pixels whose photosite, or a neighbour demosaicing mixed in, reached the white level:
+        their value is a lower bound.
+    black_level : float
+        Mean black level removed, in raw units.
+    white_level : float
+        The sensor's clipping level, in raw units.
+    """
+
+    image: np.ndarray
+    saturated: np.ndarray
+    black_level: float
+    white_level: float
+
+
+def _grow_3x3(mask: np.ndarray) -> np.ndarray:
+    """``mask`` or any of its 8 neighbours (the pixels a demosaic mixes a photosite into)."""
+    pad = np.pad(mask, 1)
+    grown = np.zeros_like(mask)
+    for dy in range(3):
+        for dx in range(3):
+            grown |= pad[dy : dy + mask.shape[0], dx : dx + mask.shape[1]]
+    return grown
+
+
+def decode_raw(source, *, name: str | None = None) -> RawDecode:
+    """Decode a camera RAW file linearly with rawpy (LibRaw): the one RAW decoder of Albedit.
+
+    Parameters
+    ----------
+    source : bytes, bytearray, memoryview, str or Path
+        The complete file in memory (as downloaded from a tethered camera) or its path.
+    name : str, optional, keyword-only
+        How to name the data in error messages (default: the path, or ``"<RAW bytes>"``).
+
+    Returns
+    -------
+    RawDecode
+
+    Raises
+    ------
+    InputError
+        Empty data, a missing file, or data LibRaw cannot decode (corrupt, truncated or
+        unsupported); the message names the file.
+
+    Notes
+    -----
+    Decoded with :func:`raw_postprocess_options`. Black and white level come from the file;
+    with auto-brightening off LibRaw subtracts the per-channel black level and maps the white
+    level to 65535, so dividing by 65535 puts white at 1.0. Two things are the sensor's, not
+    ours: values at or above the white level come out as exactly 1.0 (flagged in
+    ``saturated``), and LibRaw clips noise below the black level to 0, so very dark pixels
+    carry a small positive bias.
+
+    Examples
+    --------
+    >>> try:
+    ...     decode_raw(b"not a raw file", name="DSC_0001.NEF")
+    ... except InputError as exc:
+    ...     print(str(exc).split(" (")[0])
+    DSC_0001.NEF: cannot decode RAW data
+    """
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        label = name or "<RAW bytes>"
+        if len(source) == 0:
+            raise InputError(f"{label}: RAW data is empty (0 bytes)")
+        data = io.BytesIO(bytes(source))
+    elif isinstance(source, (str, os.PathLike)):
+        label = name or str(source)
+        data = os.fspath(source)
+    else:
+        raise InputError(f"{name or 'RAW data'}: data must be bytes or a path, got {type(source).__name__}")
     try:
-        with rawpy.imread(source) as raw:
+        with rawpy.imread(data) as raw:
+            if raw.raw_type == rawpy.RawType.Stack:  # a linear DNG: values per pixel, no mosaic
+                return _decode_linear(raw)
+            mosaic = np.array(raw.raw_image_visible, copy=True)
+            white = float(raw.white_level)
+            black = float(np.mean(raw.black_level_per_channel))
             rgb = raw.postprocess(**raw_postprocess_options())
     except (rawpy.LibRawError, rawpy.NotSupportedError, ValueError, EOFError) as exc:
         raise InputError(f"{label}: cannot decode RAW data ({type(exc).__name__}: {exc})") from exc
-    # With auto-brightness off, LibRaw subtracts the per-channel black level and maps the
-    # white level to 65535: dividing by 65535 puts white at 1.0.
-    return np.ascontiguousarray(rgb, dtype=np.float32) / np.float32(65535.0)
+    except OSError as exc:
+        raise InputError(f"{label}: cannot read file: {exc}") from exc
+    image = np.ascontiguousarray(rgb, dtype=np.float32) / np.float32(65535.0)
+    saturated = np.any(rgb >= 65535, axis=2)
+    if mosaic.shape == rgb.shape[:2]:  # a mosaic in the output's grid: spread clipped photosites
+        clipped = mosaic >= white
+        if clipped.ndim == 3:  # a linear (already demosaiced) DNG holds one value per channel
+            clipped = clipped.any(axis=2)
+        if clipped.any():
+            saturated |= _grow_3x3(clipped)
+    return RawDecode(image=image, saturated=saturated, black_level=black, white_level=white)
+
+
+def _decode_linear(raw) -> RawDecode:
+    """A linear ("stacked") DNG: three values per pixel, read as stored.
+
+    LibRaw's ``postprocess`` scales such files by 1 / white level instead of
+    1 / (white − black) (3 % low at a 14-bit camera's black level of 512) and reports no clipped
+    pixel, so the values are taken from ``raw_image_visible`` with the file's own levels.
+    """
+    n = int(raw.num_colors)
+    values = np.asarray(raw.raw_image_visible)[..., :n].astype(np.float32)
+    black = np.asarray(raw.black_level_per_channel[:n], np.float32)
+    white = float(raw.white_level)
+    image = (values - black) / (np.float32(white) - black)
+    np.maximum(image, 0.0, out=image)  # as LibRaw clips noise below black for mosaics
+    saturated = np.any(values >= white, axis=2)
+    return RawDecode(image=np.ascontiguousarray(image), saturated=saturated, black_level=float(black.mean()), white_level=white)
 
 
 def read_raw_bytes(data: bytes, *, name: str = "<RAW bytes>") -> np.ndarray:
-    """Decode a camera RAW file held in memory (e.g. downloaded from a tethered camera).
+    """Decode a camera RAW file held in memory: :func:`decode_raw`'s image.
 
     Parameters
     ----------
@@ -493,13 +610,7 @@ def read_raw_bytes(data: bytes, *, name: str = "<RAW bytes>") -> np.ndarray:
     Raises
     ------
     InputError
-        Empty data, or data LibRaw cannot decode.
-
-    Notes
-    -----
-    Decoded with :func:`raw_postprocess_options`. Two things are the sensor's, not ours:
-    values at or above the white level come out as exactly 1.0 (saturation), and LibRaw clips
-    noise below the black level to 0, so very dark pixels carry a small positive bias.
+        Not bytes, empty data, or data LibRaw cannot decode.
 
     Examples
     --------
@@ -511,9 +622,7 @@ def read_raw_bytes(data: bytes, *, name: str = "<RAW bytes>") -> np.ndarray:
     """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise InputError(f"{name}: data must be bytes, got {type(data).__name__}")
-    if len(data) == 0:
-        raise InputError(f"{name}: RAW data is empty (0 bytes)")
-    return _decode_raw(io.BytesIO(bytes(data)), name)
+    return decode_raw(data, name=name).image
 
 
 def read_metadata(path) -> dict[str, Any]:

@@ -7,7 +7,8 @@ that call them.
 
 from __future__ import annotations
 
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 from engine.errors import Cancelled
 

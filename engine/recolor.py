@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_kappa
+from engine.checks import check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
 from engine.figurate import outside_matrix, transport_matrix

@@ -36,14 +36,14 @@ import shutil
 import threading
 import zipfile
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 import numpy as np
 
 from engine import imageio
-from engine._checks import check_float_image, check_mask, check_order
+from engine.checks import check_float_image, check_mask, check_order, check_resolution
 from engine.errors import InputError, SessionError
 
 __all__ = ["SCHEMA_VERSION", "CaptureRecord", "LoadedCapture", "Session", "pattern_hash"]
@@ -165,17 +165,6 @@ def _check_name(kind: str, name) -> str:
     return name
 
 
-def _check_resolution(name: str, value) -> tuple[int, int]:
-    try:
-        h, w = value
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be (height, width), got {value!r}") from None
-    for v in (h, w):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise InputError(f"{name} must be two positive integers (height, width), got {value!r}")
-    return int(h), int(w)
-
-
 def _json_default(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
@@ -209,7 +198,7 @@ def _sha256_file(path: Path) -> tuple[str, int]:
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def _is_int(value) -> bool:
@@ -264,7 +253,7 @@ class Session:
         camera_resolution: tuple[int, int],
         projector_resolution: tuple[int, int],
         metadata: dict | None = None,
-    ) -> "Session":
+    ) -> Session:
         """Create a new, empty session folder.
 
         Parameters
@@ -302,8 +291,8 @@ class Session:
         path = Path(path)
         if not isinstance(rig_name, str) or not rig_name:
             raise InputError(f"rig_name must be a non-empty string, got {rig_name!r}")
-        camera = _check_resolution("camera_resolution", camera_resolution)
-        projector = _check_resolution("projector_resolution", projector_resolution)
+        camera = check_resolution("camera_resolution", camera_resolution)
+        projector = check_resolution("projector_resolution", projector_resolution)
         metadata = _to_json("metadata", {} if metadata is None else metadata)
         if not isinstance(metadata, dict):
             raise InputError(f"metadata must be a dict, got {type(metadata).__name__}")
@@ -340,7 +329,7 @@ class Session:
         return session
 
     @classmethod
-    def open(cls, path, *, verify: bool = False) -> "Session":
+    def open(cls, path, *, verify: bool = False) -> Session:
         """Open an existing session, checking it without changing anything on disk.
 
         Parameters

@@ -22,9 +22,8 @@ from itertools import combinations
 
 import numpy as np
 
-from engine._checks import check_choice
+from engine.checks import check_choice
 from engine.errors import InputError
-
 
 #: numba's default threading layer (workqueue) must not launch parallel kernels from two
 #: threads at once; the app runs engine work on worker threads.

@@ -42,6 +42,6 @@ def test_quick_benchmark_runs(name, tmp_path):
 
 
 def test_albedit_bench_offers_every_benchmark():
-    from app.commands.bench import NAMES
+    from app.cli.bench import NAMES
 
     assert set(NAMES) == {p.stem for p in BENCH.glob("*.py")}

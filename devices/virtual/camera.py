@@ -57,12 +57,12 @@ class CameraModel:
     ideal: bool = False
 
     @classmethod
-    def realistic(cls) -> "CameraModel":
+    def realistic(cls) -> CameraModel:
         """A 14-bit RAW camera: 20 000 e- full well, 3 e- read noise, black level 512."""
         return cls()
 
     @classmethod
-    def perfect(cls) -> "CameraModel":
+    def perfect(cls) -> CameraModel:
         """The ideal camera: returns the radiance exactly, clipping only at 1e12 electrons."""
         return cls(black_level=0.0, read_noise=0.0, bits=64, full_well=1e12, ideal=True)
 

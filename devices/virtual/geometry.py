@@ -85,7 +85,7 @@ class View:
     resolution: tuple[int, int]
 
     @classmethod
-    def look_at(cls, position, look_at, up, fov_deg: float, resolution: tuple[int, int]) -> "View":
+    def look_at(cls, position, look_at, up, fov_deg: float, resolution: tuple[int, int]) -> View:
         """Build a view from a pose and a vertical field of view with square pixels.
 
         Examples
@@ -99,7 +99,7 @@ class View:
         return cls.with_frustum(position, look_at, up, f, f, resolution)
 
     @classmethod
-    def with_frustum(cls, position, look_at, up, fx: float, fy: float, resolution) -> "View":
+    def with_frustum(cls, position, look_at, up, fx: float, fy: float, resolution) -> View:
         """Build a view from a pose and focal lengths (principal point at the image centre)."""
         position = np.asarray(position, np.float64)
         fwd = np.asarray(look_at, np.float64) - position
@@ -111,7 +111,7 @@ class View:
         h, w = resolution
         return cls(position, rot, float(fx), float(fy), (w - 1) / 2.0, (h - 1) / 2.0, (int(h), int(w)))
 
-    def rescaled(self, resolution: tuple[int, int]) -> "View":
+    def rescaled(self, resolution: tuple[int, int]) -> View:
         """The same pose and frustum sampled at another resolution (co-axial projector)."""
         h, w = self.resolution
         hp, wp = resolution

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from engine._checks import check_float_image
+from engine.checks import check_float_image
 from engine.errors import InputError
 
 
@@ -48,12 +48,12 @@ class ProjectorModel:
     ideal: bool = False
 
     @classmethod
-    def realistic(cls) -> "ProjectorModel":
+    def realistic(cls) -> ProjectorModel:
         """A DLP-like projector: gamma about 2.2, 0.3 % black level, a few % crosstalk."""
         return cls()
 
     @classmethod
-    def perfect(cls) -> "ProjectorModel":
+    def perfect(cls) -> ProjectorModel:
         """The ideal projector: emitted = input, exactly."""
         return cls(gamma=np.ones(3), black_level=0.0, crosstalk=np.eye(3), ideal=True)
 

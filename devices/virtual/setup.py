@@ -42,8 +42,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from devices.virtual.geometry import (Quads, View, blocker_table, cast_rays, occluded,
-                                      polygon_form_factor, quad_corners)
+from devices.virtual.geometry import Quads, View, blocker_table, cast_rays, occluded, polygon_form_factor, quad_corners
 from devices.virtual.scene import Scene
 from engine.progress import report
 

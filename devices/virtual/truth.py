@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.virtual.projector import ProjectorModel, check_pattern
 from devices.virtual.camera import CameraModel
+from devices.virtual.projector import ProjectorModel, check_pattern
 from devices.virtual.render import Renderer
 from devices.virtual.transport import Resolvent, interactions
-from engine._checks import check_kappa, check_mask, check_order
+from engine.checks import check_kappa, check_mask, check_order
 from engine.errors import InputError
 
 

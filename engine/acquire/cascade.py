@@ -20,7 +20,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from engine._checks import check_kappa, check_order
 from engine.acquire.emission import Emitter
 from engine.acquire.noise import Noise, covariance_stack
 from engine.acquire.predict import Adaptive, Policy, Predictor, relative_error
@@ -28,6 +27,7 @@ from engine.acquire.recorder import Recorder
 from engine.acquire.steps import Acquisition, CaptureSettings, EmittedNoise, reemit
 from engine.acquire.target import PreparedTarget, pattern_budget, prepare_target
 from engine.calibrate import Calibration
+from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
 from engine.recolor import recolor, recolor_weights

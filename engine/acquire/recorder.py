@@ -19,6 +19,7 @@ import numpy as np
 from engine.errors import DeviceError, SessionError
 from engine.noise import CameraNoise, frame_variance
 from engine.progress import Progress, ShouldStop, checkpoint, report
+from engine.rig import Frame, RigLike
 from engine.session import Session, pattern_hash
 
 
@@ -28,9 +29,9 @@ class Recorder:
 
     Parameters
     ----------
-    rig : object
-        Anything with ``rig.projector.show(image)`` and ``rig.camera.capture() -> Frame``
-        (the protocols of ``devices.base``; the engine does not import ``devices``).
+    rig : engine.rig.RigLike
+        A camera and a projector (the protocols of :mod:`engine.rig`, implemented by
+        ``devices``; the engine does not import ``devices``).
     session : Session, optional
         Where captures are written the moment they arrive, and read back on resume.
     progress : callable, optional
@@ -64,7 +65,7 @@ class Recorder:
         neither the frame nor :attr:`noise` knows the camera's noise.
     """
 
-    rig: object
+    rig: RigLike
     session: Session | None = None
     progress: Progress | None = None
     should_stop: ShouldStop | None = None
@@ -149,7 +150,7 @@ class Recorder:
         saturated = np.logical_or.reduce([np.asarray(f.saturated, bool) for f in shots])
         meta = dict(getattr(first, "metadata", {}) or {})
         meta["frames"] = self.frames
-        return _Frame(image, first.exposure, getattr(first, "gain", 1.0), getattr(first, "black_level", 0.0), saturated, meta)
+        return Frame(image, first.exposure, getattr(first, "gain", 1.0), getattr(first, "black_level", 0.0), saturated, meta)
 
     def _bracketed(self, frame):
         """Complete the frame's saturated pixels from shorter exposures (same projector image)."""
@@ -182,21 +183,9 @@ class Recorder:
         meta["brackets"] = used
         if refused is not None:
             meta["bracketing_refused"] = refused
-        return _Frame(image, frame.exposure, getattr(frame, "gain", 1.0), getattr(frame, "black_level", 0.0), saturated, meta)
+        return Frame(image, frame.exposure, getattr(frame, "gain", 1.0), getattr(frame, "black_level", 0.0), saturated, meta)
 
     def black(self) -> np.ndarray:
         """A black projector image of the rig's projector resolution."""
         hp, wp = self.rig.projector.resolution
         return np.zeros((hp, wp, 3), np.float32)
-
-
-@dataclass(frozen=True)
-class _Frame:
-    """A merged frame, with the attributes ``Session.add_frame`` reads from a device Frame."""
-
-    image: np.ndarray
-    exposure: float
-    gain: float
-    black_level: float
-    saturated: np.ndarray
-    metadata: dict

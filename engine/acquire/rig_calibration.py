@@ -107,7 +107,7 @@ def calibrate_rig(
         correspondence=corr,
         crosstalk=xtalk,
         metadata={
-            "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
             "exposure": str(report_),
             "coverage": corr.summary(),
             "exposure_s": float(getattr(rig.camera, "exposure", 0.0) or 0.0),

@@ -18,9 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_mask
 from engine.acquire.recorder import Recorder
-from engine.calibrate import Calibration, Correspondence, fill_correspondence, high_frequency_patterns, projector_footprint
+from engine.calibrate import (
+    Calibration,
+    Correspondence,
+    fill_correspondence,
+    high_frequency_patterns,
+    projector_footprint,
+)
+from engine.checks import check_mask
 from engine.decompose import Decomposition, decompose
 from engine.errors import InputError
 from engine.fill import fill_unreachable

@@ -7,10 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from engine.calibrate._common import check_image, check_resolution, wh
+from engine.calibrate._common import wh
 from engine.calibrate.crosstalk import Crosstalk
 from engine.calibrate.graycode import Correspondence
 from engine.calibrate.response import ProjectorResponse
+from engine.checks import check_image, check_resolution
 from engine.errors import InputError
 from engine.noise import CameraNoise
 
@@ -147,7 +148,7 @@ class Calibration:
         return meta, arrays
 
     @classmethod
-    def from_dict(cls, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> "Calibration":
+    def from_dict(cls, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> Calibration:
         """Rebuild from :meth:`to_dict`'s output, checking kind, version, dtypes and shapes.
 
         Examples

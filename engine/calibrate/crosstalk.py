@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_mask
-from engine.calibrate._common import Patterns, check_image, check_resolution, check_stack
+from engine.calibrate._common import Patterns
+from engine.checks import check_image, check_mask, check_resolution, check_stack
 from engine.errors import InputError
 
 __all__ = ["Crosstalk", "crosstalk_patterns", "fit_crosstalk"]
@@ -75,7 +75,7 @@ class Crosstalk:
         object.__setattr__(self, "_inverse", inv)
 
     @classmethod
-    def none(cls) -> "Crosstalk":
+    def none(cls) -> Crosstalk:
         """No crosstalk (identity)."""
         return cls(np.eye(3))
 
@@ -122,7 +122,7 @@ class Crosstalk:
         return {"matrix": self.matrix.tolist()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Crosstalk":
+    def from_dict(cls, d: dict) -> Crosstalk:
         """Inverse of :meth:`to_dict`."""
         try:
             return cls(np.asarray(d["matrix"], dtype=np.float64))

@@ -19,8 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_mask
-from engine.calibrate._common import Patterns, check_image, check_images, check_resolution
+from engine.calibrate._common import Patterns
+from engine.checks import check_image, check_images, check_mask, check_resolution
 from engine.errors import InputError
 
 __all__ = ["DirectImage", "direct_image", "high_frequency_patterns"]

@@ -11,8 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_mask
-from engine.calibrate._common import check_fraction, check_image, check_images, check_positive
+from engine.checks import check_fraction, check_image, check_images, check_mask, check_positive
 from engine.errors import InputError
 
 __all__ = ["AutoExposure", "ExposureReport", "black_frame", "exposure_report", "projector_lit"]

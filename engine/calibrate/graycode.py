@@ -19,7 +19,8 @@ from enum import IntEnum
 import cv2
 import numpy as np
 
-from engine.calibrate._common import Patterns, check_resolution, plane_to_rgb, wh
+from engine.calibrate._common import Patterns, plane_to_rgb, wh
+from engine.checks import check_resolution
 from engine.errors import InputError
 
 __all__ = [
@@ -174,7 +175,7 @@ class Correspondence:
             object.__setattr__(self, name, a)
 
     @classmethod
-    def _trusted(cls, x, y, status, projector_resolution) -> "Correspondence":
+    def _trusted(cls, x, y, status, projector_resolution) -> Correspondence:
         """Wrap arrays already known to be consistent (−1 where undecoded), without copies."""
         self = object.__new__(cls)
         for name, a in (("x", x), ("y", y), ("status", status)):
@@ -184,7 +185,7 @@ class Correspondence:
         return self
 
     @classmethod
-    def from_maps(cls, x, y, valid, projector_resolution) -> "Correspondence":
+    def from_maps(cls, x, y, valid, projector_resolution) -> Correspondence:
         """Build a correspondence from integer maps and a validity mask (invalid = UNLIT).
 
         Examples
@@ -200,7 +201,7 @@ class Correspondence:
         return cls(np.asarray(x), np.asarray(y), status, projector_resolution)
 
     @classmethod
-    def identity(cls, camera_resolution) -> "Correspondence":
+    def identity(cls, camera_resolution) -> Correspondence:
         """The co-axial rig of the paper's simulations: camera pixel (u, v) sees projector (u, v).
 
         Examples
@@ -229,7 +230,7 @@ class Correspondence:
         """
         miss = ~self.valid
         if target is not None:
-            from engine._checks import check_mask
+            from engine.checks import check_mask
 
             miss &= check_mask("target", target, self.camera_resolution)
         return miss
@@ -238,7 +239,7 @@ class Correspondence:
         """Number of camera pixels (of ``target`` if given) per :class:`PixelStatus` name."""
         s = self.status
         if target is not None:
-            from engine._checks import check_mask
+            from engine.checks import check_mask
 
             s = s[check_mask("target", target, self.camera_resolution)]
         n = np.bincount(s.ravel(), minlength=len(PixelStatus))

@@ -14,8 +14,8 @@ from enum import StrEnum
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from engine._checks import check_choice, check_mask
-from engine.calibrate._common import Patterns, check_fraction, check_image, check_images, check_resolution
+from engine.calibrate._common import Patterns
+from engine.checks import check_choice, check_fraction, check_image, check_images, check_mask, check_resolution
 from engine.errors import InputError
 
 __all__ = ["ProjectorResponse", "RampChannels", "fit_response", "ramp_levels", "response_patterns"]
@@ -183,7 +183,7 @@ class ProjectorResponse:
         object.__setattr__(self, "_fine_light", light)
 
     @classmethod
-    def linear(cls, *, black_level=0.0) -> "ProjectorResponse":
+    def linear(cls, *, black_level=0.0) -> ProjectorResponse:
         """An ideal linear projector (``f(p) = p``), e.g. the virtual rig with ``ideal=True``.
 
         Examples
@@ -278,7 +278,7 @@ class ProjectorResponse:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict) -> "ProjectorResponse":
+    def from_dict(cls, d: dict) -> ProjectorResponse:
         """Inverse of :meth:`to_dict`; validates everything."""
         try:
             return cls(np.asarray(d["levels"], float), np.asarray(d["table"], float),

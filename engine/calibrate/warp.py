@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from engine._checks import check_mask
-from engine.calibrate._common import check_resolution, wh
+from engine.calibrate._common import wh
 from engine.calibrate.graycode import Correspondence
+from engine.checks import check_mask, check_resolution
 from engine.errors import InputError
 
 __all__ = [

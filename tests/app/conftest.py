@@ -9,7 +9,7 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from app.model import Document  # noqa: E402
+from app.model.document import Document  # noqa: E402
 from engine.decompose import Decomposition, observe  # noqa: E402
 from engine.recolor import recolor  # noqa: E402
 
@@ -81,7 +81,7 @@ def make_window(qtbot, tmp_path):
     """Factory for a synchronous MainWindow with private settings."""
     from PySide6.QtCore import QSettings
 
-    from app.main_window import MainWindow
+    from app.qt.main_window import MainWindow
 
     windows = []
 
@@ -120,7 +120,7 @@ class Dialogs:
 def dialogs(monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 
-    from app.main_window import MainWindow
+    from app.qt.main_window import MainWindow
 
     rec = Dialogs()
     for kind in ("critical", "warning", "information"):

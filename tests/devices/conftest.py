@@ -79,3 +79,19 @@ def write_dng(mosaic, *, black: int = 64, white: int = 4000, cfa=(0, 1, 1, 2)) -
 def make_dng():
     """``make_dng(mosaic, black=64, white=4000) -> bytes`` (see :func:`write_dng`)."""
     return write_dng
+
+
+
+@pytest.fixture
+def without_modules(monkeypatch):
+    """``without_modules("gphoto2", ...)``: those libraries cannot be imported for this test."""
+    import sys
+
+    from tests.standins import ModuleBlocker
+
+    def block(*names):
+        for loaded in [m for m in sys.modules if m.partition(".")[0] in names]:
+            monkeypatch.delitem(sys.modules, loaded)
+        monkeypatch.setattr(sys, "meta_path", [ModuleBlocker(names), *sys.meta_path])
+
+    return block

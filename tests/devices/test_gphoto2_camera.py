@@ -1,4 +1,9 @@
-"""The gphoto2 backend against a scripted stand-in of python-gphoto2 (every exchange must be used)."""
+"""The gphoto2 backend against a scripted stand-in of python-gphoto2 (every exchange must be used).
+
+The stand-in is checked against the real python-gphoto2 when it is installed
+(:func:`test_standin_matches_python_gphoto2`); tests/devices/test_gphoto2_library.py drives the real
+library with no camera and with its virtual camera.
+"""
 
 from __future__ import annotations
 
@@ -9,18 +14,22 @@ import types
 import numpy as np
 import pytest
 
-from devices.gphoto2_camera import GPhoto2Camera, list_cameras, open_rig, probe
+import devices
+from devices.gphoto2_camera import GPhoto2Camera, list_cameras, probe
 from engine.errors import DeviceError, InputError
+from tests.standins import check_standin, stands_in_for
 
 H, W = 32, 48
 
 
+@stands_in_for("gphoto2:GPhoto2Error")
 class GPhoto2Error(Exception):
     def __init__(self, code):
         super().__init__(f"[{code}] libgphoto2 error")
         self.code = code
 
 
+@stands_in_for("gphoto2:CameraWidget")
 class Widget:
     def __init__(self, value, choices):
         self.value, self.choices = value, list(choices)
@@ -62,24 +71,81 @@ class Script:
         assert self.used == len(self.steps), f"unused scripted exchanges: {self.steps[self.used:]}"
 
 
-def fake_gphoto2(script):
-    class Camera:
-        autodetect = staticmethod(lambda: script("autodetect"))
+@stands_in_for("gphoto2:CameraList")
+class CameraList:
+    def __init__(self, pairs):
+        self.pairs = list(pairs)
 
-        def __getattr__(self, method):
-            return lambda *args: script(method, *args)
-
-    return types.SimpleNamespace(
-        Camera=Camera, GPhoto2Error=GPhoto2Error, GP_CAPTURE_IMAGE=0, GP_FILE_TYPE_NORMAL=1, PortInfoList=None
-    )
+    def items(self):
+        return iter(self.pairs)
 
 
+@stands_in_for("gphoto2:Camera")
+class Camera:
+    """python-gphoto2's Camera: every call goes to the class's script."""
+
+    script: Script
+
+    @classmethod
+    def autodetect(cls):
+        return CameraList(cls.script("autodetect"))
+
+    def init(self):
+        return self.script("init")
+
+    def exit(self):
+        return self.script("exit")
+
+    def get_single_config(self, name):
+        return self.script("get_single_config", name)
+
+    def set_single_config(self, name, widget):
+        return self.script("set_single_config", name, widget)
+
+    def capture(self, type):  # noqa: A002 (the library's name)
+        return self.script("capture", type)
+
+    def file_get(self, folder, file, type):  # noqa: A002
+        return self.script("file_get", folder, file, type)
+
+    def file_delete(self, folder, file):
+        return self.script("file_delete", folder, file)
+
+
+@stands_in_for("gphoto2:CameraFilePath", attributes=("folder", "name"))
+class FilePath:
+    def __init__(self, folder, name):
+        self.folder, self.name = folder, name
+
+
+@stands_in_for("gphoto2:CameraFile")
 class CameraFile:
     def __init__(self, data):
         self.data = data
 
     def get_data_and_size(self):
         return memoryview(self.data)
+
+
+@stands_in_for("gphoto2")
+class FakeModule:
+    """The module attributes the backend uses."""
+
+    Camera = Camera
+    GPhoto2Error = GPhoto2Error
+    GP_CAPTURE_IMAGE = 0
+    GP_FILE_TYPE_NORMAL = 1
+
+
+def fake_gphoto2(script):
+    camera = type("Camera", (Camera,), {"script": script})
+    return types.SimpleNamespace(**{k: v for k, v in vars(FakeModule).items() if not k.startswith("_")} | {"Camera": camera})
+
+
+@pytest.mark.parametrize("standin", [GPhoto2Error, Widget, CameraList, Camera, FilePath, CameraFile, FakeModule], ids=lambda c: c.__name__)
+def test_standin_matches_python_gphoto2(standin):
+    pytest.importorskip("gphoto2")
+    assert check_standin(standin) == []
 
 
 def opening(*, shutter="1/60", iso="200", target=True):
@@ -102,7 +168,7 @@ def opening(*, shutter="1/60", iso="200", target=True):
 
 
 def shot(name, data, *, delete_result=None):
-    path = types.SimpleNamespace(folder="/", name=name)
+    path = FilePath("/", name)
     return [
         ("capture", (0,), path),
         ("file_get", ("/", name, 1), CameraFile(data)),
@@ -202,7 +268,7 @@ def test_capture_error_still_deletes_nothing_and_maps_busy(make_dng):
 
 
 def test_download_failure_still_deletes_the_shot():
-    path = types.SimpleNamespace(folder="/store", name="IMG_1.CR2")
+    path = FilePath("/store", "IMG_1.CR2")
     script = Script(
         opening()
         + [("capture", (0,), path), ("file_get", ("/store", "IMG_1.CR2", 1), GPhoto2Error(-7)), ("file_delete", ("/store", "IMG_1.CR2"), None), ("exit", (), None)]
@@ -247,30 +313,28 @@ def test_listing_and_probe():
     script.finished()
 
 
-def test_missing_library_is_a_plain_device_error():
-    import importlib.util
-
-    if importlib.util.find_spec("gphoto2") is not None:
-        pytest.skip("python-gphoto2 is installed here")
-    with pytest.raises(DeviceError, match="pip install 'albedit\\[gphoto2\\]'"):
+def test_missing_library_is_a_plain_device_error(without_modules):
+    without_modules("gphoto2")
+    with pytest.raises(DeviceError, match=r"python-gphoto2 is not installed; install the optional extra: pip install 'albedit\[gphoto2\]'"):
         GPhoto2Camera()
     (entry,) = probe()
     assert not entry.ok and "not installed" in entry.reason
 
 
-def test_open_rig_with_given_projector(make_dng):
+def test_open_rig_with_given_projector():
     from devices.virtual import open_rig as open_virtual
 
     script = Script(opening() + [("exit", (), None)])
     with open_virtual("cornell", ideal=True) as virtual:
-        rig = open_rig("", projector=virtual.projector, exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
-        assert rig.name == "gphoto2"
+        rig = devices.open_rig("gphoto2", projector=virtual.projector, exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
+        assert rig.name == "gphoto2" and rig.projector is virtual.projector
         rig.camera.close()
     script.finished()
 
 
 def reapply(shutter="1/8"):
-    """A reconnection: init, then every setting written again (some bodies forget them per session)."""
+    """A reconnection: a fresh handle's init, then every setting written again (some bodies forget
+    them per session)."""
     return [
         ("init", (), None),
         ("get_single_config", ("capturetarget",), Widget("Memory card", ["Internal RAM", "Memory card"])),
@@ -345,7 +409,10 @@ def test_session_released_when_idle_and_reopened_by_the_next_capture(make_dng):
     script.finished()
 
 
-def test_hdr_bracket_merges_a_shorter_shot_where_the_first_clipped(make_dng):
+def test_clipped_pixels_are_completed_by_the_recorders_bracket_at_snapped_shutter_speeds(make_dng):
+    """The one HDR merge (the acquisition Recorder's) through this backend's exposure snapping."""
+    from engine.acquire import Recorder
+
     black, white = 64, 4000
     span = white - black
     # radiance (fraction of full scale per second at gain 1): left half 4, right half 16
@@ -355,30 +422,38 @@ def test_hdr_bracket_merges_a_shorter_shot_where_the_first_clipped(make_dng):
         frac = radiance * t * 2.0  # gain 2 (ISO 200 / 100)
         return make_dng(np.where(frac >= 1, white, np.rint(black + frac * span)).astype(np.uint16))
 
-    long_raw, short_raw = dng(1 / 8), dng(1 / 60)  # right half clips at 1/8 s (16 * 0.25 = 4 > 1)
     script = Script(
         opening()
-        + shot("capt0000.dng", long_raw)
+        + shot("capt0000.dng", dng(1 / 8))  # the right half clips at 1/8 s (16 * 0.25 = 4 > 1)
         + [("get_single_config", ("shutterspeed",), Widget("1/8", SHUTTERS)), ("set_single_config", ("shutterspeed", "1/60"), None)]
-        + shot("capt0001.dng", short_raw)
+        + shot("capt0001.dng", dng(1 / 60))  # 1/8 / 8 = 1/64 s snaps to 1/60 s
         + [("get_single_config", ("shutterspeed",), Widget("1/60", SHUTTERS)), ("set_single_config", ("shutterspeed", "1/8"), None)]
         + [("exit", (), None)]
     )
-    cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, hdr_brackets=2, gp=fake_gphoto2(script))
-    frame = cam.capture()
-    assert frame.metadata["bracket"] == [0.125, 1 / 60] and frame.metadata["raw_names"] == ["capt0000.dng", "capt0001.dng"]
-    assert not frame.saturated.any() and frame.exposure == 0.125
-    np.testing.assert_allclose(frame.image[4:-4, 4 : W // 2 - 4], 4.0, rtol=2e-3)
-    np.testing.assert_allclose(frame.image[4:-4, W // 2 + 4 : -4], 16.0, rtol=2e-3)
-    assert [n for n, _ in cam.last_raws] == ["capt0000.dng", "capt0001.dng"] and cam.last_raw == long_raw
-    assert cam.settings["exposure"] == "1/8"  # restored after the bracket
+    cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, gp=fake_gphoto2(script))
+
+    class Projector:
+        resolution, bit_depth = (4, 4), 8
+
+        def show(self, image):
+            pass
+
+    rig = types.SimpleNamespace(camera=cam, projector=Projector())
+    image = Recorder(rig, brackets=2, bracket_step=8.0).capture("flat", np.zeros((4, 4, 3), np.float32))
+    np.testing.assert_allclose(image[4:-4, 4 : W // 2 - 4], 4.0, rtol=2e-3)
+    np.testing.assert_allclose(image[4:-4, W // 2 + 4 : -4], 16.0, rtol=2e-3)
+    assert cam.exposure == 0.125 and cam.settings["exposure"] == "1/8"  # restored after the bracket
     cam.close()
     script.finished()
 
 
-def test_probe_lists_cameras_and_says_when_the_projector_screen_is_missing():
+def test_available_says_when_the_projector_screen_is_missing(monkeypatch):
+    import devices.gphoto2_camera as backend
+
     script = Script([("autodetect", (), [("Canon EOS 80D", "usb:001,005")])])
-    (entry,) = probe(gp=fake_gphoto2(script))
+    monkeypatch.setattr(backend, "_gphoto2", lambda: fake_gphoto2(script))
+    (entry,) = [a for a in devices.available() if a.name.startswith("gphoto2:")]
     assert entry.name == "gphoto2:usb:001,005" and entry.reason.startswith("Canon EOS 80D")
     assert not entry.ok and "no second screen" in entry.reason  # the offscreen test platform has one screen
+    assert "pass projector='qtscreen:0'" in entry.reason
     script.finished()

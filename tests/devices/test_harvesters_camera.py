@@ -1,4 +1,9 @@
-"""The GenICam backend against a scripted stand-in of ``harvesters.core`` (every exchange must be used)."""
+"""The GenICam backend against a scripted stand-in of ``harvesters.core`` (every exchange must be used).
+
+The stand-in is checked against the real harvesters and genicam when installed
+(:func:`test_standin_matches_harvesters`); tests/devices/test_harvesters_library.py drives the real
+library with genicam's simulated GenTL producer.
+"""
 
 from __future__ import annotations
 
@@ -11,8 +16,9 @@ import numpy as np
 import pytest
 
 import devices
-from devices.harvesters_camera import open_camera, open_rig, probe, to_rgb
+from devices.harvesters_camera import open_camera, probe, to_rgb
 from engine.errors import DeviceError, InputError
+from tests.standins import check_standin, stands_in_for
 
 H, W = 6, 8
 
@@ -50,10 +56,9 @@ class Script:
         assert used == len(self.steps), f"unused scripted exchanges: {self.steps[used:]}"
 
 
-class Node:
-    def __init__(self, script, name, value, *, lo=None, hi=None, symbolics=()):
+class _Node:
+    def __init__(self, script, name, value):
         self._script, self._name, self._value = script, name, value
-        self.min, self.max, self.symbolics = lo, hi, list(symbolics)
 
     @property
     def value(self):
@@ -65,54 +70,125 @@ class Node:
         self._value = v
 
 
+@stands_in_for("genicam.genapi:IEnumeration", attributes=("value", "symbolics"))
+class EnumNode(_Node):
+    def __init__(self, script, name, value, symbolics=()):
+        super().__init__(script, name, value)
+        self.symbolics = list(symbolics)
+
+
+@stands_in_for("genicam.genapi:IInteger", attributes=("value",))
+class IntNode(_Node):
+    pass
+
+
+@stands_in_for("genicam.genapi:IFloat", attributes=("value", "min", "max"))
+class FloatNode(_Node):
+    def __init__(self, script, name, value, lo, hi):
+        super().__init__(script, name, value)
+        self.min, self.max = lo, hi
+
+
+@stands_in_for("harvesters.core:Component2DImage", attributes=("data", "data_format", "width", "height"))
+class Component:
+    def __init__(self, data, data_format, width, height):
+        self.data, self.data_format, self.width, self.height = data, data_format, width, height
+
+
+@stands_in_for("harvesters.core:PayloadImage", attributes=("components",))
+class Payload:
+    def __init__(self, components):
+        self.components = components
+
+
+@stands_in_for("harvesters.core:Buffer", attributes=("payload",))
 class Buffer:
     def __init__(self, script, data, fmt, w, h):
-        comp = types.SimpleNamespace(data=data, data_format=fmt, width=w, height=h)
-        self.payload = types.SimpleNamespace(components=[comp])
+        self.payload = Payload([Component(data, fmt, w, h)])
         self._script = script
 
     def queue(self):
         self._script("queue")
 
 
+@stands_in_for("harvesters.core:RemoteDevice", attributes=("node_map",))
+class RemoteDevice:
+    def __init__(self, node_map):
+        self.node_map = node_map
+
+
+@stands_in_for("harvesters.core:ImageAcquirer", attributes=("remote_device",))
+class ImageAcquirer:
+    script: Script
+    node_map: object
+
+    def __init__(self):
+        self.remote_device = RemoteDevice(self.node_map)
+
+    def start(self):
+        self.script("start")
+
+    def stop(self):
+        self.script("stop")
+
+    def try_fetch(self, *, timeout):
+        time.sleep(min(timeout, 0.01))  # a producer waits for a buffer
+        return self.script("try_fetch")
+
+    def destroy(self):
+        self.script("destroy")
+
+
+@stands_in_for("harvesters.core:ParameterSet", constructed=True)
+class ParameterSet:
+    def __init__(self, parameter_dict=None):
+        self.parameters = dict(parameter_dict or {})
+
+
+@stands_in_for("harvesters.core:ParameterKey")
+class ParameterKey:
+    LOGGER = 0
+
+
+@stands_in_for("harvesters.core:Harvester", attributes=("device_info_list",), constructed=True)
+class Harvester:
+    script: Script
+    acquirer: type
+    device_info_list: list
+
+    def __init__(self, *, config=None):
+        self.config = config
+
+    def add_file(self, file_path, check_existence=False, check_validity=False):
+        self.script("add_file", file_path, check_existence, check_validity)
+
+    def update(self):
+        self.script("update")
+
+    def create(self, search_key=None):
+        self.script("create", search_key)
+        return self.acquirer()
+
+    def reset(self):
+        self.script("reset")
+
+
+@pytest.mark.parametrize(
+    "standin",
+    [EnumNode, IntNode, FloatNode, Component, Payload, Buffer, RemoteDevice, ImageAcquirer, ParameterSet, ParameterKey, Harvester],
+    ids=lambda c: c.__name__,
+)
+def test_standin_matches_harvesters(standin):
+    pytest.importorskip("harvesters.core")
+    assert check_standin(standin) == []
+
+
 def install(monkeypatch, script, nodes, devices_found=("cam0",)):
     """Put a fake ``harvesters.core`` in sys.modules: Harvester and ImageAcquirer call the script."""
-    node_map = types.SimpleNamespace(**nodes)
-
-    class ImageAcquirer:
-        remote_device = types.SimpleNamespace(node_map=node_map)
-
-        def start(self):
-            script("start")
-
-        def stop(self):
-            script("stop")
-
-        def try_fetch(self, *, timeout):
-            time.sleep(min(timeout, 0.01))  # a producer waits for a buffer
-            return script("try_fetch")
-
-        def destroy(self):
-            script("destroy")
-
-    class Harvester:
-        device_info_list = list(devices_found)
-
-        def add_file(self, path):
-            script("add_file", path)
-
-        def update(self):
-            script("update")
-
-        def create(self, key):
-            script("create", key)
-            return ImageAcquirer()
-
-        def reset(self):
-            script("reset")
-
+    acquirer = type("ImageAcquirer", (ImageAcquirer,), {"script": script, "node_map": types.SimpleNamespace(**nodes)})
+    harvester = type("Harvester", (Harvester,), {"script": script, "acquirer": acquirer, "device_info_list": list(devices_found)})
     core = types.ModuleType("harvesters.core")
-    core.Harvester = Harvester
+    core.Harvester, core.ParameterSet, core.ParameterKey = harvester, ParameterSet, ParameterKey
     package = types.ModuleType("harvesters")
     package.core = core
     monkeypatch.setitem(sys.modules, "harvesters", package)
@@ -121,18 +197,18 @@ def install(monkeypatch, script, nodes, devices_found=("cam0",)):
 
 def nodes_for(script, *, formats=("Mono8", "Mono12", "BayerRG12")):
     return {
-        "ExposureAuto": Node(script, "ExposureAuto", "Continuous"),
-        "GainAuto": Node(script, "GainAuto", "Continuous"),
-        "PixelFormat": Node(script, "PixelFormat", "Mono8", symbolics=formats),
-        "Width": Node(script, "Width", W),
-        "Height": Node(script, "Height", H),
-        "ExposureTime": Node(script, "ExposureTime", 10000.0, lo=20.0, hi=1e6),
-        "Gain": Node(script, "Gain", 0.0, lo=0.0, hi=24.0),
+        "ExposureAuto": EnumNode(script, "ExposureAuto", "Continuous", ("Off", "Continuous")),
+        "GainAuto": EnumNode(script, "GainAuto", "Continuous", ("Off", "Continuous")),
+        "PixelFormat": EnumNode(script, "PixelFormat", "Mono8", formats),
+        "Width": IntNode(script, "Width", W),
+        "Height": IntNode(script, "Height", H),
+        "ExposureTime": FloatNode(script, "ExposureTime", 10000.0, 20.0, 1e6),
+        "Gain": FloatNode(script, "Gain", 0.0, 0.0, 24.0),
     }
 
 
 OPENING = [
-    ("add_file", ("/x.cti",), None),
+    ("add_file", ("/x.cti", True, True), None),
     ("update", (), None),
     ("create", ({"serial_number": "S1"},), None),
     ("set", ("ExposureAuto", "Off"), None),
@@ -151,7 +227,7 @@ def cti(tmp_path):
 
 
 def opening(cti):
-    return [(n, (str(cti),), r) if n == "add_file" else (n, a, r) for n, a, r in OPENING]
+    return [(n, (str(cti), True, True), r) if n == "add_file" else (n, a, r) for n, a, r in OPENING]
 
 
 def test_capture_is_linear_with_black_level_exposure_and_gain(monkeypatch, cti):
@@ -211,20 +287,20 @@ def test_bad_options_list_the_choices(monkeypatch, cti):
 
 
 def test_no_camera_and_producer_errors(monkeypatch, cti, tmp_path):
-    script = Script([("add_file", (str(cti),), None), ("update", (), None), ("reset", (), None)])
+    script = Script([("add_file", (str(cti), True, True), None), ("update", (), None), ("reset", (), None)])
     install(monkeypatch, script, nodes_for(script), devices_found=())
     with pytest.raises(DeviceError, match="no GenICam camera found through x.cti"):
         open_camera(cti)
     script.finished()
-    script = Script([("add_file", (str(cti),), RuntimeError("GenTL: invalid producer")), ("reset", (), None)])
+    script = Script([("add_file", (str(cti), True, True), OSError("x.cti: file too short")), ("reset", (), None)])
     install(monkeypatch, script, nodes_for(script))
-    with pytest.raises(DeviceError, match="loading the GenTL producer failed: GenTL: invalid producer"):
+    with pytest.raises(DeviceError, match="loading the GenTL producer failed: x.cti: file too short"):
         open_camera(cti)
     script.finished()
     with pytest.raises(DeviceError, match="no GenTL producer file"):
         open_camera(tmp_path / "missing.cti")
     with pytest.raises(InputError, match="needs the GenTL producer"):
-        open_rig("")
+        devices.open_rig("harvesters")
 
 
 def test_bayer_patterns_demosaic_to_the_right_colour():
@@ -239,11 +315,8 @@ def test_bayer_patterns_demosaic_to_the_right_colour():
         to_rgb(np.zeros(4, np.uint8), "YUV422_8", 2, 2)
 
 
-def test_probe_without_the_library(monkeypatch):
-    monkeypatch.setitem(sys.modules, "harvesters", None)  # as if not installed
-    import importlib.util
-
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None)
+def test_probe_without_the_library(without_modules):
+    without_modules("harvesters", "genicam")
     (entry,) = probe()
     assert not entry.ok and "pip install 'albedit[harvesters]'" in entry.reason
     assert any(a.name.startswith("harvesters:") for a in devices.available())

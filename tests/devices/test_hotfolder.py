@@ -9,7 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from devices.hotfolder import HotFolderCamera, open_rig
+import devices
+from devices.hotfolder import HotFolderCamera
 from engine.errors import DeviceError, InputError
 from engine.imageio import write_image
 
@@ -153,19 +154,40 @@ def test_open_rig_pairs_a_given_projector(tmp_path):
     from devices.virtual import open_rig as open_virtual
 
     with open_virtual("cornell", ideal=True) as virtual:
-        rig = open_rig(str(tmp_path), projector=virtual.projector, resolution=(H, W))
+        rig = devices.open_rig(f"hotfolder:{tmp_path}", projector=virtual.projector, resolution=(H, W))
         assert rig.name == f"hotfolder:{tmp_path}" and rig.camera.resolution == (H, W)
     with pytest.raises(InputError, match="needs a folder"):
-        open_rig("")
+        devices.open_rig("hotfolder")
+    with pytest.raises(InputError, match=r"projector options \['settle'\] only apply to a projector opened by name"):
+        devices.open_rig(f"hotfolder:{tmp_path}", projector=virtual.projector, settle=0.2)
 
 
 def test_open_camera_and_probe_name_the_missing_projector_screen(tmp_path):
-    from devices.hotfolder import open_camera, probe
+    from devices.hotfolder import open_camera
 
     cam = open_camera(tmp_path, resolution=(H, W), exposure=0.5)
     assert isinstance(cam, HotFolderCamera) and cam.resolution == (H, W) and cam.exposure == 0.5
-    (entry,) = probe()
-    assert entry.name == "hotfolder:FOLDER"
+    (entry,) = [a for a in devices.available() if a.name == "hotfolder:FOLDER"]
     assert not entry.ok and "no second screen" in entry.reason  # one offscreen test screen
     with pytest.raises(DeviceError, match="no second screen for the projector"):
-        open_rig(str(tmp_path), resolution=(H, W))  # default projector: the second screen
+        devices.open_rig(f"hotfolder:{tmp_path}", resolution=(H, W))  # default projector: the second screen
+
+
+def test_a_file_that_arrives_before_the_trigger_is_refused_by_name(tmp_path):
+    script = "import sys; open(sys.argv[1], 'w').close()"
+    marker = tmp_path.parent / (tmp_path.name + "_fired")
+    cam = HotFolderCamera(tmp_path, trigger=[sys.executable, "-c", script, str(marker)], **FAST)
+    write_image(tmp_path / "stray.exr", np.zeros((H, W, 3), np.float32))  # the camera fired on its own
+    with pytest.raises(DeviceError, match=r"received 'stray.exr' before the camera was triggered: a frame taken for an earlier pattern"):
+        cam.capture()
+    assert not marker.exists()  # the camera was not fired for a frame that would be misattributed
+    assert (tmp_path / "stray.exr").exists()  # nothing deleted
+
+
+def test_waits_go_through_the_paired_projectors_idle(tmp_path):
+    waits = []
+    cam = HotFolderCamera(tmp_path, poll=0.01, timeout=0.05)
+    cam.set_idle(lambda s: (waits.append(s), time.sleep(s)))
+    with pytest.raises(DeviceError, match="no new image arrived"):
+        cam.capture()
+    assert waits and set(waits) == {0.01}

@@ -6,10 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
+import devices
 from devices._linearize import ResponseCurve, calibrate_response, response_curve
 from devices.base import Frame
-from devices.opencv_camera import open_camera, open_rig
+from devices.opencv_camera import open_camera
 from engine.errors import DeviceError, InputError
+from tests.standins import check_standin, stands_in_for
 
 H, W = 48, 64
 
@@ -155,17 +157,18 @@ def test_open_rig_with_a_given_projector(tmp_path):
     with open_virtual("cornell", ideal=True) as virtual:
         proj = virtual.projector
         codes = np.zeros((H, W, 3), np.uint16)
-        rig = open_rig(_write_sequence(tmp_path, [codes, codes]), projector=proj)
+        rig = devices.open_rig(f"opencv:{_write_sequence(tmp_path, [codes, codes])}", projector=proj)
         assert rig.projector is proj and rig.camera.resolution == (H, W)
         assert rig.name.startswith("opencv:")
         rig.camera.close()
 
 
+@stands_in_for("cv2:VideoCapture")
 class FakeV4L2:
     """A scripted stand-in for ``cv2.VideoCapture`` on a V4L2 webcam: gamma-1.6 frames of a known
     radiance at the exposure last set (in 100 microsecond units); refuses auto exposure."""
 
-    radiance = np.geomspace(1.0, 1000.0, H * W).reshape(H, W)[..., None] * np.array([1.0, 0.8, 0.6])
+    _radiance = np.geomspace(1.0, 1000.0, H * W).reshape(H, W)[..., None] * np.array([1.0, 0.8, 0.6])
 
     def __init__(self, index, *args):
         self.units = 100.0  # 10 ms
@@ -194,7 +197,7 @@ class FakeV4L2:
         return True
 
     def read(self):
-        lin = np.clip(self.radiance * self.units * 1e-4, 0.0, 1.0)
+        lin = np.clip(self._radiance * self.units * 1e-4, 0.0, 1.0)
         rgb = np.rint(lin ** (1 / 1.6) * 255).astype(np.uint8)
         return True, np.ascontiguousarray(rgb[:, :, ::-1])
 
@@ -223,8 +226,29 @@ def test_webcam_controls_refusals_recorded_and_response_measured(monkeypatch):
         assert frame.metadata["response"] == "debevec" and frame.metadata["controls"]["auto_exposure"] == "refused"
         ok = ~frame.saturated & (frame.image[..., 1] > frame.image[..., 1].max() * 0.05)
         # linear after calibration: radiance ratios match the scene's (Debevec fixes scale only)
-        ratio = frame.image[..., 1][ok] / FakeV4L2.radiance[..., 1][ok]
+        ratio = frame.image[..., 1][ok] / FakeV4L2._radiance[..., 1][ok]
         assert ratio.std() / ratio.mean() < 0.03  # the assumed sRGB curve is off by ~20 % here
     finally:
         cam.close()
     assert dev.released
+
+
+def test_standin_matches_opencv():
+    assert check_standin(FakeV4L2) == []
+
+
+def test_a_camera_index_with_no_device_is_one_plain_line(capfd):
+    """The real VideoCapture on an index with no camera: OpenCV's per-backend warnings stay off
+    the terminal, and the CLI prints one line."""
+    import glob
+
+    from app.main import main
+
+    index = 97
+    if glob.glob(f"/dev/video{index}"):
+        pytest.skip(f"/dev/video{index} exists here")
+    with pytest.raises(DeviceError, match=rf"^no camera at index {index} \(not attached, or in use by another program\)$"):
+        open_camera(index)
+    assert main(["devices", "--check", f"opencv:{index}"]) == 1
+    err = capfd.readouterr().err.strip().splitlines()
+    assert err == [f"albedit devices: error: no camera at index {index} (not attached, or in use by another program)"]

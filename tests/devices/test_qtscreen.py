@@ -143,9 +143,49 @@ def test_unknown_screen_and_closed_projector(projector):
 
 def test_vanished_screen_raises(projector):
     screen = qtscreen.QGuiApplication.screens()[0]
-    projector._on_screen_removed(screen)  # what Qt emits when the projector is unplugged
-    with pytest.raises(DeviceError, match="was disconnected"):
+    qtscreen.QApplication.instance().screenRemoved.emit(screen)  # what Qt emits when the projector is unplugged
+    with pytest.raises(DeviceError, match="the projector's screen '.*' was disconnected; reconnect the projector"):
         projector.show(np.zeros((*projector.resolution, 3), np.float32))
+    with pytest.raises(DeviceError, match="was disconnected"):
+        projector.grab_screen()
+
+
+def test_window_closed_by_the_user_is_a_typed_error_not_a_timeout(projector):
+    projector.window.close()  # Alt+F4, or the window manager
+    with pytest.raises(DeviceError, match=r"the projector window on '.*' was closed \(by the user or the window manager\)"):
+        projector.show(np.zeros((*projector.resolution, 3), np.float32))
+
+
+def test_idle_keeps_the_ui_thread_serving_a_worker(projector):
+    """A camera waiting on the UI thread (the command line's hot folder) must not starve the
+    window: a worker's show() and screen grab are served while the UI thread idles."""
+    pattern = _pattern(projector.resolution, seed=2)
+    result = {}
+
+    def work():
+        try:
+            projector.show(pattern)
+            result["grab"] = projector.grab_screen()
+        except BaseException as exc:
+            result["error"] = exc
+
+    worker = threading.Thread(target=work)
+    worker.start()
+    deadline = 200
+    while worker.is_alive() and deadline:
+        projector.idle(0.02)
+        deadline -= 1
+    worker.join(1)
+    assert "error" not in result, result
+    np.testing.assert_array_equal(result["grab"], np.rint(pattern * 255).astype(np.uint8))
+
+
+def test_idle_waits_at_least_the_time_asked(projector):
+    import time
+
+    start = time.monotonic()
+    projector.idle(0.05)
+    assert time.monotonic() - start >= 0.05
 
 
 _CHILD = r"""
@@ -187,3 +227,4 @@ def test_second_screen_selected_by_index_or_name(tmp_path, choice):
 def test_probe_lists_screens():
     entries = qtscreen.probe()
     assert [e.name for e in entries] == ["qtscreen:0"] and entries[0].ok
+    assert qtscreen.default_problem() == "no second screen for the projector (1 screen found)"

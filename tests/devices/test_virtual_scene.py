@@ -117,7 +117,7 @@ def test_valid_scene_file_opens_as_a_rig(tmp_path, wedge_json, cache):
 
 
 def test_unknown_scene_and_missing_scene_name():
-    with pytest.raises(InputError, match=r"unknown virtual scene 'nope'; expected one of \['cornell'"):
+    with pytest.raises(InputError, match=r"unknown virtual scene 'nope'; expected one of \[.*'cornell'"):
         devices.open_rig("virtual:nope")
     with pytest.raises(InputError, match="virtual rig needs a scene"):
         devices.open_rig("virtual:")

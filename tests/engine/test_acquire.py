@@ -17,7 +17,10 @@ from engine.errors import Cancelled, InputError, SessionError
 from engine.recolor import recolor
 from engine.session import Session
 
-from .conftest import GAMMA, H, W, C, PatchRig, stand_in_calibration as _calibration, exact_prepared as _prepared
+from .conftest import GAMMA, C, H, PatchRig, W
+from .conftest import exact_prepared as _prepared
+from .conftest import stand_in_calibration as _calibration
+
 
 @pytest.mark.parametrize("per_channel", [True, False])
 @pytest.mark.parametrize("differences", [True, False])

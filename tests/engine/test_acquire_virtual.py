@@ -156,7 +156,6 @@ def test_unreachable_and_empty_targets_are_refused_with_reasons(rig, tmp_path):
 
 def test_rgb_emission_corrects_crosstalk_per_pixel_with_a_third_of_the_captures(rig, tmp_path):
     from devices.virtual.camera import CameraModel
-
     from engine.acquire import CaptureSettings
 
     errors, shots = {}, {}

@@ -9,7 +9,7 @@ from engine.errors import Cancelled, InputError
 from engine.recolor import recolor
 from engine.session import Session
 
-from .conftest import H, W, PatchRig, exact_prepared, stand_in_calibration
+from .conftest import H, PatchRig, W, exact_prepared, stand_in_calibration
 
 KAPPAS = [np.array([1.5, 0.6, 2.0]), np.array([0.5, 1.8, 1.2]), np.array([2.0, 2.0, 0.4])]
 

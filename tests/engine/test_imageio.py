@@ -13,6 +13,7 @@ from engine import imageio
 from engine.errors import InputError
 from engine.imageio import (
     atomic_write,
+    decode_raw,
     image_info,
     read_image,
     read_metadata,
@@ -22,6 +23,7 @@ from engine.imageio import (
     to_display,
     write_image,
 )
+from tests.standins import check_standin, stands_in_for
 
 
 def _image(shape=(7, 9, 3), *, low=0.0, high=1.0, seed=0):
@@ -323,23 +325,35 @@ def test_dng_brightness_is_linear_across_frames():
     assert default.mean() > 0.95  # what the guard prevents
 
 
+@stands_in_for("rawpy:RawPy", attributes=("raw_image_visible", "white_level", "black_level_per_channel"))
+class RawStandIn:
+    """rawpy's RawPy: records the postprocess options; a white frame."""
+
+    _calls: list = []
+    raw_image_visible = np.full((2, 3), 4095, np.uint16)
+    white_level = 4095
+    black_level_per_channel = [64, 64, 64, 64]
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc_val, exc_tb):
+        return None
+
+    def postprocess(self, params=None, **kw):
+        self._calls.append(kw)
+        return np.full((2, 3, 3), 65535, np.uint16)
+
+
+def test_raw_standin_matches_rawpy():
+    assert check_standin(RawStandIn) == []
+
+
 def test_raw_uses_exactly_the_linear_postprocess_options(monkeypatch):
-    calls = []
-
-    class StandIn:
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            return False
-
-        def postprocess(self, **kwargs):
-            calls.append(kwargs)
-            return np.full((2, 3, 3), 65535, np.uint16)
-
-    monkeypatch.setattr(rawpy, "imread", lambda source: StandIn())
-    out = read_raw_bytes(b"stand-in")
-    assert calls == [
+    monkeypatch.setattr(RawStandIn, "_calls", [])
+    monkeypatch.setattr(rawpy, "imread", lambda source: RawStandIn())
+    raw = decode_raw(b"stand-in")
+    assert RawStandIn._calls == [
         {
             "gamma": (1, 1),
             "no_auto_bright": True,
@@ -347,9 +361,12 @@ def test_raw_uses_exactly_the_linear_postprocess_options(monkeypatch):
             "output_color": rawpy.ColorSpace.raw,
             "user_wb": [1.0, 1.0, 1.0, 1.0],
             "adjust_maximum_thr": 0.0,
+            "user_flip": 0,
         }
     ]
-    np.testing.assert_array_equal(out, np.ones((2, 3, 3), np.float32))
+    np.testing.assert_array_equal(raw.image, np.ones((2, 3, 3), np.float32))
+    assert raw.saturated.all() and (raw.black_level, raw.white_level) == (64.0, 4095.0)
+    np.testing.assert_array_equal(read_raw_bytes(b"stand-in"), raw.image)
 
 
 def test_raw_errors(tmp_path):

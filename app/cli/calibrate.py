@@ -1,0 +1,27 @@
+"""``albedit calibrate``: black frame, projector response and Gray-code correspondences."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from app.cli._args import add_rig_options, open_rig
+from app.cli.main import ProgressBar
+from engine.workflow import open_session_for_rig, run_calibration
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("session", type=Path, help="session folder (created if missing; an interrupted calibration resumes)")
+    add_rig_options(parser)
+    parser.add_argument("--levels", type=int, default=17, help="grey levels of the response ramp (default %(default)s)")
+    parser.add_argument("--crosstalk", action="store_true", help="also measure projector-primary to camera-channel crosstalk")
+
+
+def run(args) -> int:
+    with open_rig(args) as rig:
+        session = open_session_for_rig(args.session, rig)
+        cal = run_calibration(rig, session, levels=args.levels, crosstalk=args.crosstalk, progress=ProgressBar())
+    print(f"calibrated {rig.name} into {args.session}", file=sys.stderr)
+    print(cal.metadata.get("coverage", ""), file=sys.stderr)
+    print(cal.metadata.get("exposure", ""), file=sys.stderr)
+    return 0

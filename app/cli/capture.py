@@ -1,0 +1,103 @@
+"""``albedit capture``: the observations of one target, or a cascade of several."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from app.cli._args import add_rig_options, kappa, open_rig
+from app.cli.main import ProgressBar
+from engine.acquire import Adaptive, CaptureSettings
+from engine.errors import InputError, SessionError
+from engine.imageio import read_image
+from engine.session import Session
+from engine.workflow import estimated_report, load_calibration, open_session_for_rig, run_capture, save_calibration
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("session", type=Path, help="a calibrated session folder (`albedit calibrate`), or a new one with --calibration")
+    parser.add_argument("--calibration", type=Path, default=None, metavar="SESSION",
+                        help="re-use the calibration of another session of the same rig (refused if the rig differs)")
+    add_rig_options(parser)
+    parser.add_argument(
+        "--target", action="append", required=True, metavar="NAME[=MASK.png]",
+        help="target in cascade order (repeat for a cascade); NAME alone uses the rig's named target",
+    )
+    parser.add_argument("--order", type=_order, default=4,
+                        help="decomposition order K, or 'auto': capture until the linear prediction of the newest "
+                             "image is within --threshold (one target; default %(default)s)")
+    parser.add_argument("--fixed-kappa", type=kappa, action="append", default=[], metavar="R,G,B",
+                        help="kappa of each target but the last, in order (fixed before capture)")
+    parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute",
+                        help="predict captures instead of taking them (Sec. 5); default %(default)s")
+    parser.add_argument("--threshold", type=float, default=0.01, help="adaptive relative-error threshold (default 1%%)")
+    parser.add_argument("--frames", type=int, default=1, help="frames averaged per capture (default %(default)s)")
+    parser.add_argument("--rgb", action="store_true", help="emit all channels at once instead of one primary at a time")
+    parser.add_argument("--flood", type=float, default=None, metavar="LEVEL",
+                        help="light the photograph with a projector flood of this level instead of black")
+
+
+def _order(text: str):
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"order must be an integer 1..8 or 'auto', got {text!r}") from None
+
+
+def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
+    out = []
+    for spec in args.target:
+        name, _, path = spec.partition("=")
+        if path:
+            mask = read_image(path)[..., 0] > 0.5
+        elif name in rig.targets:
+            mask = rig.targets[name]
+        else:
+            raise InputError(f"target {name!r} is not one of the rig's targets {sorted(rig.targets)}; give NAME=MASK.png")
+        out.append((name, mask))
+    return out
+
+
+def run(args) -> int:
+    with open_rig(args) as rig:
+        if args.calibration is not None:
+            calibration = load_calibration(Session.open(args.calibration))
+            calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+            session = open_session_for_rig(args.session, rig)
+            if session.read_calibration()[0]:
+                if session.read_calibration()[0] != calibration.to_dict()[0]:
+                    raise SessionError(f"session {args.session} already has a different calibration; use a new session folder")
+            else:
+                save_calibration(session, calibration)
+        else:
+            session = Session.open(args.session)
+            session.recover_orphans()
+        targets = _targets(args, rig)
+        flood = None
+        if args.flood is not None:
+            hp, wp = rig.projector.resolution
+            flood = np.full((hp, wp, 3), args.flood, np.float32)
+        result = run_capture(
+            rig, session, targets, args.order,
+            fixed_kappa=args.fixed_kappa,
+            settings=CaptureSettings(per_channel=not args.rgb),
+            adaptive=Adaptive(args.adaptive, args.threshold) if args.adaptive != "brute" or args.order == "auto" else None,
+            photograph_pattern=flood,
+            frames=args.frames,
+            progress=ProgressBar(),
+        )
+    print(
+        f"captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots) "
+        f"for {', '.join(n for n, _ in targets)} at order {len(result.acquisition.observations)}",
+        file=sys.stderr,
+    )
+    for name, prepared in result.targets:
+        print(f"{name}: {prepared.report()}", file=sys.stderr)
+    if line := estimated_report(session):
+        print(line, file=sys.stderr)
+    return 0

@@ -1,0 +1,89 @@
+"""The headless ``albedit`` subcommands for lab techs and batch work.
+
+``albedit demo``, ``calibrate``, ``capture``, ``recolor``, ``export``, ``devices`` and ``bench``
+report progress on stderr, print one-line errors and exit non-zero on failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+
+from engine.errors import AlbeditError
+
+#: subcommand name -> (module, one-line help); modules expose add_arguments(parser) and run(args)
+COMMANDS = {
+    "demo": ("app.cli.demo", "run the whole pipeline on the virtual Cornell box and score it against ground truth"),
+    "calibrate": ("app.cli.calibrate", "calibrate a rig (black frame, projector response, Gray-code correspondences)"),
+    "capture": ("app.cli.capture", "capture the observations of one target (or a cascade) into a session"),
+    "recolor": ("app.cli.recolor", "recolor a captured session's target and write the image"),
+    "export": ("app.cli.export", "export a session's saved edit (targets and kappa) as EXR, TIFF or PNG"),
+    "devices": ("app.cli.devices", "list the rigs this machine can open and take one frame from one"),
+    "bench": ("app.cli.bench", "run the engine benchmarks"),
+}
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr, usable as an engine ``progress`` callback."""
+
+    def __init__(self, stream=None, *, width: int = 28):
+        self.stream = stream or sys.stderr
+        self.width = width
+        self.start = time.monotonic()
+        self._last = ""
+
+    def __call__(self, step: int, total: int, message: str) -> None:
+        frac = 0.0 if total <= 0 else min(1.0, step / total)
+        filled = int(round(frac * self.width))
+        elapsed = time.monotonic() - self.start
+        eta = f" ~{elapsed / frac - elapsed:4.0f}s left" if 0 < frac < 1 else ""
+        line = f"\r[{'#' * filled}{'.' * (self.width - filled)}] {step}/{total} {message[:48]:<48}{eta}"
+        if line != self._last:
+            self.stream.write(line)
+            self.stream.flush()
+            self._last = line
+        if total > 0 and step >= total:
+            self.stream.write("\n")
+            self._last = ""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    import importlib
+
+    parser = argparse.ArgumentParser(
+        prog="albedit",
+        description="Measurement-based editing of diffuse albedo with consistent interreflections.",
+        epilog="Without a subcommand, opens the desktop app (on the virtual rig demo, or on SESSION).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, (module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        importlib.import_module(module).add_arguments(p)
+        p.set_defaults(_module=module)
+    return parser
+
+
+def run_command(argv: list[str] | None = None) -> int:
+    """Parse ``argv`` (a subcommand and its options), run it, and return the exit status."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    if args.command is None:
+        build_parser().print_help()
+        return 2
+    import importlib
+
+    run: Callable = importlib.import_module(args._module).run
+    try:
+        return int(run(args) or 0)
+    except KeyboardInterrupt:
+        print("albedit: interrupted; finished captures are kept in the session", file=sys.stderr)
+        return 130
+    except AlbeditError as exc:
+        print(f"albedit {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(run_command())

@@ -1,1 +1,0 @@
-"""Headless ``albedit`` subcommands: each module has ``add_arguments(parser)`` and ``run(args)``."""

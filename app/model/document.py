@@ -1,0 +1,701 @@
+"""The editing model: photograph, targets (masks, κ, cascade order), acquisition and undo.
+
+Qt-free. Widgets write the model; the model says what changed through psygnal signals
+(:class:`DocumentEvents`); every edit is a command on the undo :class:`~app.model.history.History`.
+
+Vocabulary (DESIGN.md): a *target* is a set of camera pixels whose albedo is scaled by
+*kappa* (κ, one factor per channel). Targets are kept in *cascade* order (paper, Sec. 4):
+once a cascade has been acquired, the κ of every target but the last one shaped the light
+emitted for the later ones, so they are locked; only the last target's κ stays free and is
+the one :func:`engine.recolor.recolor` applies to the decomposition.
+"""
+
+from __future__ import annotations
+
+import uuid
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from psygnal import Signal, SignalGroup
+
+from app.model.history import History
+from engine.checks import check_float_image, check_kappa, check_mask
+from engine.errors import InputError
+
+#: Slider range of κ (log scale), as in the issue: 1/16 … 16.
+KAPPA_MIN = 1.0 / 16.0
+KAPPA_MAX = 16.0
+
+#: Overlay colours (RGB) handed to new targets in turn.
+PALETTE: tuple[tuple[int, int, int], ...] = (
+    (255, 70, 70),
+    (60, 150, 255),
+    (255, 205, 0),
+    (60, 215, 120),
+    (200, 90, 255),
+    (255, 135, 20),
+    (0, 215, 215),
+    (255, 90, 185),
+)
+
+BBox = tuple[int, int, int, int]  # (y0, y1, x0, x1), half-open, camera pixels
+
+
+@dataclass
+class Target:
+    """One target: a binary mask in camera pixels and its albedo scale.
+
+    Attributes
+    ----------
+    uid : int
+        Stable identity (names change, positions change).
+    name : str
+    mask : (H, W) bool
+        Owned by the document; edit it only through :class:`Document`.
+    kappa : (3,) float64
+        Per-channel albedo scale κ.
+    colour : (3,) int
+        Overlay colour, RGB 0..255.
+    """
+
+    uid: int
+    name: str
+    mask: np.ndarray
+    kappa: np.ndarray = field(default_factory=lambda: np.ones(3))
+    colour: tuple[int, int, int] = PALETTE[0]
+
+
+@dataclass(frozen=True)
+class Acquisition:
+    """What was measured: the cascade (target uids, first to last) and the decomposition.
+
+    ``decomposition`` is the last target's decomposition, computed from observations that
+    already carry the earlier targets' κ (paper, Algorithm 1); ``kappas`` are those κ.
+    ``masks`` are the acquired masks (copies); ``key`` names the measurement (session cache).
+    With noise reduction (``denoise`` > 0, :func:`engine.denoise.denoise_components` of that
+    radius) ``decomposition`` is the filtered one and ``measured`` the one measured.
+    """
+
+    cascade: tuple[int, ...]
+    kappas: tuple[np.ndarray, ...]
+    masks: tuple[np.ndarray, ...]
+    decomposition: Any
+    key: str
+    denoise: int = 0
+    measured: Any = None
+
+    @property
+    def raw(self):
+        """The decomposition as measured (before noise reduction)."""
+        return self.decomposition if self.measured is None else self.measured
+
+
+class DocumentEvents(SignalGroup):
+    """Signals of a :class:`Document` (all emitted on the thread that edits it)."""
+
+    #: targets added, removed, renamed or reordered
+    targets = Signal()
+    #: mask of target ``uid`` changed inside ``bbox`` (y0, y1, x0, x1)
+    mask = Signal(int, object)
+    #: κ of target ``uid`` changed
+    kappa = Signal(int, object)
+    #: the current (selected) target changed: uid or -1
+    current = Signal(int)
+    #: acquisition / decomposition replaced or discarded
+    acquisition = Signal()
+    #: a message for the user about a harmless but notable edit (e.g. unreachable pixels)
+    warning = Signal(str)
+    #: saved / modified state flipped
+    dirty = Signal(bool)
+
+
+class Document:
+    """Everything the user edits, Qt-free.
+
+    Parameters
+    ----------
+    photograph : (H, W, 3) float32
+        Linear radiance, the original image (``obs[0]``).
+    unreachable : (H, W) bool, optional
+        Camera pixels the projector cannot light (shadowed, grazing, outside the projector
+        frustum). Painting them is allowed and shown, but refused for acquisition.
+    history : History-like, optional
+        Undo stack; the app passes a QUndoStack adapter. Default: a Qt-free :class:`History`.
+    source : str
+        Where the photograph came from (rig name or path), for titles and metadata.
+    truth : object, optional
+        Ground truth with ``recolor([(mask, kappa), ...])`` (virtual rig only).
+
+    Examples
+    --------
+    >>> doc = Document(np.zeros((4, 5, 3), np.float32))
+    >>> t = doc.add_target("wall")
+    >>> doc.set_kappa(t.uid, 2.0); doc.target(t.uid).kappa
+    array([2., 2., 2.])
+    >>> doc.history.undo(); doc.target(t.uid).kappa
+    array([1., 1., 1.])
+    """
+
+    def __init__(self, photograph, *, unreachable=None, history=None, source: str = "", truth=None):
+        self.photograph = check_float_image("photograph", photograph, ndim=3).astype(np.float32, copy=False)
+        if self.photograph.shape[2] != 3:
+            raise InputError(f"photograph must have 3 channels (H, W, 3), got shape {self.photograph.shape}")
+        self.shape: tuple[int, int] = self.photograph.shape[:2]
+        self.unreachable = None if unreachable is None else check_mask("unreachable", unreachable, self.shape).copy()
+        self.events = DocumentEvents()
+        self.history = history if history is not None else History()
+        self.history.changed.connect(self._on_history_changed)
+        self.source = source
+        self.truth = truth
+        self.targets: list[Target] = []
+        self.current: int = -1
+        self.acquisition: Acquisition | None = None
+        self._next_uid = 1
+        self._gesture: tuple[int, np.ndarray] | None = None
+        self._stroke: _Stroke | None = None
+        self._dirty_outside_history = False
+        self._last_dirty = False
+
+    def use_history(self, history) -> None:
+        """Move to another (empty) undo stack, e.g. a QUndoStack adapter once on the UI thread."""
+        was_dirty = self.is_dirty()
+        self.history.changed.disconnect(self._on_history_changed)
+        self.history = history
+        history.clear()
+        history.changed.connect(self._on_history_changed)
+        self._dirty_outside_history = was_dirty
+        self._emit_dirty()
+
+    # ----------------------------------------------------------------- queries
+    def target(self, uid: int) -> Target:
+        """The target with ``uid``; InputError if there is none."""
+        for t in self.targets:
+            if t.uid == uid:
+                return t
+        raise InputError(f"no target with uid {uid}; targets are {[t.uid for t in self.targets]}")
+
+    def index(self, uid: int) -> int:
+        """Cascade position of target ``uid``."""
+        return self.targets.index(self.target(uid))
+
+    def by_name(self, name: str) -> Target:
+        for t in self.targets:
+            if t.name == name:
+                return t
+        raise InputError(f"no target named {name!r}; targets are {[t.name for t in self.targets]}")
+
+    @property
+    def decomposition(self):
+        return None if self.acquisition is None else self.acquisition.decomposition
+
+    def kappa_lock(self, uid: int) -> str:
+        """Why κ of ``uid`` cannot change (empty string when it can)."""
+        acq = self.acquisition
+        if acq is None or uid not in acq.cascade[:-1]:
+            return ""
+        later = ", ".join(repr(self.target(u).name) for u in acq.cascade[acq.cascade.index(uid) + 1 :] if self._has(u))
+        return (
+            f"κ of {self.target(uid).name!r} is fixed: it shaped the light emitted while acquiring "
+            f"{later or 'the later targets'} (cascade, paper Sec. 4). Discard the acquisition to change it."
+        )
+
+    def mask_lock(self, uid: int) -> str:
+        """Why the mask of ``uid`` cannot change (empty string when it can)."""
+        acq = self.acquisition
+        if acq is None or uid not in acq.cascade:
+            return ""
+        return (
+            f"the mask of {self.target(uid).name!r} was acquired: the measured decomposition belongs to it. "
+            "Discard the acquisition to edit it."
+        )
+
+    def is_dirty(self) -> bool:
+        """True when there are unsaved changes."""
+        return self._dirty_outside_history or not self.history.is_clean()
+
+    def unreachable_conflicts(self) -> dict[str, int]:
+        """Painted pixels the projector cannot reach, per target name (only non-zero counts)."""
+        if self.unreachable is None:
+            return {}
+        out = {}
+        for t in self.targets:
+            n = int(np.count_nonzero(t.mask & self.unreachable))
+            if n:
+                out[t.name] = n
+        return out
+
+    def check_acquirable(self, uids=None) -> None:
+        """Raise InputError if the targets cannot be acquired (empty, or unreachable pixels).
+
+        Parameters
+        ----------
+        uids : sequence of int, optional
+            The cascade to acquire, first to last; default every target in order.
+        """
+        uids = [t.uid for t in self.targets] if uids is None else list(uids)
+        if not uids:
+            raise InputError("no target to acquire: add a target and paint it first")
+        for u in uids:
+            t = self.target(u)
+            if not t.mask.any():
+                raise InputError(f"target {t.name!r} is empty: paint it before acquiring")
+        conflicts = {n: c for n, c in self.unreachable_conflicts().items() if self.by_name(n).uid in uids}
+        if conflicts:
+            listed = ", ".join(f"{n!r}: {c} px" for n, c in conflicts.items())
+            raise InputError(
+                f"targets cover pixels the projector cannot reach ({listed}); their light cannot be "
+                "re-emitted. Erase them (shown hatched) before acquiring."
+            )
+
+    # ----------------------------------------------------------------- target list
+    def add_target(self, name: str | None = None, mask=None, *, kappa=1.0, index: int | None = None) -> Target:
+        """Add a target (undoable) and make it current. Returns it."""
+        name = self._unique_name(name or f"target {len(self.targets) + 1}")
+        mask = np.zeros(self.shape, bool) if mask is None else check_mask("mask", mask, self.shape).copy()
+        colour = self._free_colour()
+        t = Target(self._next_uid, name, mask, check_kappa(kappa, 3), colour)
+        self._next_uid += 1
+        index = len(self.targets) if index is None else int(index)
+        self.history.push(_AddTarget(self, t, index))
+        return t
+
+    def remove_target(self, uid: int) -> None:
+        """Delete a target (undoable). Acquired targets can't be removed."""
+        if lock := self.mask_lock(uid):
+            raise InputError(f"cannot delete: {lock}")
+        self.history.push(_RemoveTarget(self, self.target(uid), self.index(uid)))
+
+    def rename_target(self, uid: int, name: str) -> None:
+        """Rename (undoable). Names are unique and non-empty."""
+        name = str(name).strip()
+        t = self.target(uid)
+        if name == t.name:
+            return
+        if not name:
+            raise InputError("target name must not be empty")
+        if any(o.name == name for o in self.targets if o.uid != uid):
+            raise InputError(f"target name {name!r} is already used; choose another")
+        self.history.push(_Rename(self, uid, t.name, name))
+
+    def move_target(self, uid: int, index: int) -> None:
+        """Move target ``uid`` to cascade position ``index`` (undoable)."""
+        old = self.index(uid)
+        index = int(index)
+        if not 0 <= index < len(self.targets):
+            raise InputError(f"index must be in 0..{len(self.targets) - 1}, got {index}")
+        if index == old:
+            return
+        if self.acquisition is not None:
+            raise InputError("the cascade order was fixed by the acquisition; discard it to reorder targets")
+        self.history.push(_Move(self, uid, old, index))
+
+    def set_current(self, uid: int) -> None:
+        """Select the target that tools paint into (not an edit: no undo step)."""
+        if uid != -1:
+            self.target(uid)
+        if uid != self.current:
+            self.current = uid
+            self.events.current.emit(uid)
+
+    # ----------------------------------------------------------------- kappa
+    def set_kappa(self, uid: int, kappa) -> None:
+        """Set κ of target ``uid``: one undo step, or live inside a slider gesture."""
+        if lock := self.kappa_lock(uid):
+            raise InputError(lock)
+        k = check_kappa(kappa, 3)
+        t = self.target(uid)
+        if np.array_equal(k, t.kappa):
+            return
+        if self._gesture is not None and self._gesture[0] == uid:
+            self._apply_kappa(uid, k)
+        else:
+            self.history.push(_Kappa(self, uid, t.kappa.copy(), k))
+
+    def begin_kappa_gesture(self, uid: int) -> None:
+        """A slider drag starts: κ changes until :meth:`end_kappa_gesture` make one undo step."""
+        self.end_kappa_gesture()
+        self._gesture = (uid, self.target(uid).kappa.copy())
+
+    def end_kappa_gesture(self) -> None:
+        """Close the current slider gesture (no-op without one)."""
+        if self._gesture is None:
+            return
+        uid, old = self._gesture
+        self._gesture = None
+        if self._has(uid) and not np.array_equal(old, self.target(uid).kappa):
+            self.history.push(_Kappa(self, uid, old, self.target(uid).kappa.copy()), applied=True)
+
+    def reset_kappa(self, uid: int) -> None:
+        """κ back to 1 (undoable)."""
+        self.set_kappa(uid, 1.0)
+
+    # ----------------------------------------------------------------- masks
+    def begin_stroke(self, uid: int) -> None:
+        """A drag starts painting ``uid``; :meth:`paint` calls accumulate into one undo step."""
+        if lock := self.mask_lock(uid):
+            raise InputError(lock)
+        self.end_stroke()
+        self._stroke = _Stroke(uid)
+
+    def paint(self, uid: int, bbox: BBox, stamp: np.ndarray, value: bool) -> int:
+        """Set ``mask[bbox][stamp] = value``; returns the number of pixels that changed.
+
+        Inside a stroke (:meth:`begin_stroke`) the old values are remembered for one undo step
+        when the stroke ends; outside a stroke each call is its own undo step.
+        """
+        bbox = self._clip_bbox(bbox)
+        if bbox is None:
+            return 0
+        y0, y1, x0, x1 = bbox
+        stamp = np.asarray(stamp, bool)
+        if stamp.shape != (y1 - y0, x1 - x0):
+            raise InputError(f"stamp must have the bbox's shape {(y1 - y0, x1 - x0)}, got {stamp.shape}")
+        t = self.target(uid)
+        region = t.mask[y0:y1, x0:x1]
+        change = stamp & (region != value)
+        n = int(np.count_nonzero(change))
+        if n == 0:
+            return 0
+        if self._stroke is None or self._stroke.uid != uid:
+            if lock := self.mask_lock(uid):
+                raise InputError(lock)
+            after = region.copy()
+            after[change] = value
+            self.history.push(_MaskEdit(self, uid, bbox, region.copy(), after, "Paint"))
+        else:
+            self._stroke.remember(t.mask, bbox)
+            region[change] = value
+            self.events.mask.emit(uid, bbox)
+        self._warn_unreachable(t, bbox, change, value)
+        return n
+
+    def end_stroke(self) -> None:
+        """Close the stroke: one undo step with its bounding box and old values."""
+        stroke, self._stroke = self._stroke, None
+        if stroke is None or stroke.bbox is None or not self._has(stroke.uid):
+            return
+        y0, y1, x0, x1 = stroke.bbox
+        after = self.target(stroke.uid).mask[y0:y1, x0:x1].copy()
+        if np.array_equal(after, stroke.before):
+            return
+        self.history.push(_MaskEdit(self, stroke.uid, stroke.bbox, stroke.before, after, "Paint"), applied=True)
+
+    def set_mask_region(self, uid: int, bbox: BBox, values: np.ndarray, text: str = "Edit mask") -> None:
+        """Replace ``mask[bbox]`` with ``values`` as one undo step (polygon, fill, clear)."""
+        if lock := self.mask_lock(uid):
+            raise InputError(lock)
+        y0, y1, x0, x1 = bbox
+        t = self.target(uid)
+        before = t.mask[y0:y1, x0:x1].copy()
+        values = np.asarray(values, bool)
+        if values.shape != before.shape:
+            raise InputError(f"values must have the bbox's shape {before.shape}, got {values.shape}")
+        if np.array_equal(before, values):
+            return
+        self.history.push(_MaskEdit(self, uid, bbox, before, values.copy(), text))
+        self._warn_unreachable(t, bbox, values & ~before, True)
+
+    def clear_mask(self, uid: int) -> None:
+        """Empty the mask (one undo step storing only the painted bounding box)."""
+        bbox = _nonzero_bbox(self.target(uid).mask)
+        if bbox is not None:
+            y0, y1, x0, x1 = bbox
+            self.set_mask_region(uid, bbox, np.zeros((y1 - y0, x1 - x0), bool), "Clear")
+
+    def invert_mask(self, uid: int) -> None:
+        """Invert the mask (one undo step; stores no pixels: inverting is its own inverse)."""
+        if lock := self.mask_lock(uid):
+            raise InputError(lock)
+        self.target(uid)
+        self.history.push(_Invert(self, uid))
+        t = self.target(uid)
+        self._warn_unreachable(t, (0, self.shape[0], 0, self.shape[1]), t.mask, True)
+
+    # ----------------------------------------------------------------- acquisition
+    def set_acquisition(self, cascade, decomposition, *, key: str | None = None) -> None:
+        """Record a measured cascade (not undoable; clears the undo history of locked edits).
+
+        Parameters
+        ----------
+        cascade : sequence of int
+            Target uids, first to last, as acquired.
+        decomposition : engine.decompose.Decomposition
+            Decomposition of the last target; its ``target`` is that target's mask, or the part
+            of it the projector could reach (acquisition drops unreachable pixels).
+        key : str, optional
+            Id of the measurement (default: a new random one).
+        """
+        cascade = tuple(int(u) for u in cascade)
+        if not cascade:
+            raise InputError("cascade must name at least one target")
+        if len(set(cascade)) != len(cascade):
+            raise InputError(f"cascade names a target twice: {list(cascade)}")
+        for u in cascade:
+            self.target(u)
+        last = self.target(cascade[-1])
+        dshape = tuple(np.shape(decomposition.target))
+        if dshape != self.shape:
+            raise InputError(f"decomposition is {dshape}, the photograph is {self.shape}: they must match")
+        outside = int(np.count_nonzero(np.asarray(decomposition.target) & ~last.mask))
+        if outside:
+            raise InputError(
+                f"decomposition.target has {outside} pixels outside the mask of {last.name!r}, the last cascade "
+                "target; it must be that mask (or the part of it the projector could reach)"
+            )
+        self.end_stroke()
+        self.end_kappa_gesture()
+        self.acquisition = Acquisition(
+            cascade,
+            tuple(self.target(u).kappa.copy() for u in cascade),
+            tuple(self.target(u).mask.copy() for u in cascade),
+            decomposition,
+            key or f"decomposition-{uuid.uuid4().hex[:12]}",
+        )
+        # Undoing an earlier edit of a now-locked target would break the measurement.
+        self.history.clear()
+        self._dirty_outside_history = True
+        self.events.acquisition.emit()
+        self._emit_dirty()
+
+    def set_noise_reduction(self, radius: int, decomposition=None) -> None:
+        """Use ``decomposition`` — the measured one noise-reduced with ``radius`` — for recoloring.
+
+        Not undoable (a computed result, like the acquisition itself); ``radius`` 0 goes back
+        to the measured decomposition and needs none.
+
+        Raises
+        ------
+        InputError
+            Nothing acquired, a negative radius, a missing decomposition for ``radius`` > 0, or
+            one of another shape or target.
+        """
+        acq = self.acquisition
+        if acq is None:
+            raise InputError("nothing is acquired yet: noise reduction filters a decomposition")
+        radius = int(radius)
+        if radius < 0:
+            raise InputError(f"noise reduction radius must be >= 0 pixels, got {radius}")
+        if radius == 0:
+            decomposition = acq.raw
+        elif decomposition is None:
+            raise InputError("noise reduction needs the filtered decomposition")
+        elif decomposition.components.shape != acq.raw.components.shape or not np.array_equal(
+                decomposition.target, acq.raw.target):
+            raise InputError("the filtered decomposition does not match the measured one (shape or target)")
+        self.acquisition = replace(acq, decomposition=decomposition, denoise=radius,
+                                   measured=None if radius == 0 else acq.raw)
+        self._dirty_outside_history = True
+        self.events.acquisition.emit()
+        self._emit_dirty()
+
+    def discard_acquisition(self) -> None:
+        """Forget the measurement: every κ and mask becomes editable again."""
+        if self.acquisition is None:
+            return
+        self.acquisition = None
+        self._dirty_outside_history = True
+        self.events.acquisition.emit()
+        self._emit_dirty()
+
+    def recolor_kappa(self) -> np.ndarray:
+        """κ the decomposition is recolored with: the last cascade target's (ones without one)."""
+        if self.acquisition is None:
+            return np.ones(3)
+        uid = self.acquisition.cascade[-1]
+        return self.target(uid).kappa.copy() if self._has(uid) else np.ones(3)
+
+    def mark_saved(self) -> None:
+        """The document was written: the current state is clean."""
+        self._dirty_outside_history = False
+        self.history.set_clean()
+        self._emit_dirty()
+
+    # ----------------------------------------------------------------- internals
+    def _has(self, uid: int) -> bool:
+        return any(t.uid == uid for t in self.targets)
+
+    def _unique_name(self, name: str) -> str:
+        names = {t.name for t in self.targets}
+        base, i, out = name, 2, name
+        while out in names:
+            out = f"{base} ({i})"
+            i += 1
+        return out
+
+    def _free_colour(self) -> tuple[int, int, int]:
+        used = [t.colour for t in self.targets]
+        for c in PALETTE:
+            if c not in used:
+                return c
+        return PALETTE[(self._next_uid - 1) % len(PALETTE)]
+
+    def _clip_bbox(self, bbox: BBox) -> BBox | None:
+        y0, y1, x0, x1 = (int(v) for v in bbox)
+        h, w = self.shape
+        y0, x0, y1, x1 = max(y0, 0), max(x0, 0), min(y1, h), min(x1, w)
+        if y0 >= y1 or x0 >= x1:
+            return None
+        return y0, y1, x0, x1
+
+    def _apply_kappa(self, uid: int, kappa: np.ndarray) -> None:
+        self.target(uid).kappa = np.array(kappa, dtype=np.float64)
+        self.events.kappa.emit(uid, self.target(uid).kappa.copy())
+
+    def _warn_unreachable(self, t: Target, bbox: BBox, added: np.ndarray, value: bool) -> None:
+        if self.unreachable is None or not value:
+            return
+        y0, y1, x0, x1 = bbox
+        n = int(np.count_nonzero(added & self.unreachable[y0:y1, x0:x1]))
+        if n:
+            self.events.warning.emit(
+                f"{n} pixels of {t.name!r} are not reachable by the projector: shown hatched, "
+                "they will be refused for acquisition"
+            )
+
+    def _on_history_changed(self) -> None:
+        self._emit_dirty()
+
+    def _emit_dirty(self) -> None:
+        d = self.is_dirty()
+        if d != self._last_dirty:
+            self._last_dirty = d
+            self.events.dirty.emit(d)
+
+
+def _nonzero_bbox(mask: np.ndarray) -> BBox | None:
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+class _Stroke:
+    """Bounding box and old values of everything one drag touched (napari's paint atom)."""
+
+    def __init__(self, uid: int):
+        self.uid = uid
+        self.bbox: BBox | None = None
+        self.before: np.ndarray | None = None
+
+    def remember(self, mask: np.ndarray, bbox: BBox) -> None:
+        """Grow the saved region to cover ``bbox`` before ``mask[bbox]`` is modified."""
+        if self.bbox is None:
+            y0, y1, x0, x1 = bbox
+            self.bbox, self.before = bbox, mask[y0:y1, x0:x1].copy()
+            return
+        (a0, a1, b0, b1), (c0, c1, d0, d1) = self.bbox, bbox
+        new = (min(a0, c0), max(a1, c1), min(b0, d0), max(b1, d1))
+        if new == self.bbox:
+            return
+        y0, y1, x0, x1 = new
+        # Outside the old box nothing was touched yet, so the mask still holds the old values.
+        before = mask[y0:y1, x0:x1].copy()
+        before[a0 - y0 : a1 - y0, b0 - x0 : b1 - x0] = self.before
+        self.bbox, self.before = new, before
+
+
+class _MaskEdit:
+    def __init__(self, doc: Document, uid: int, bbox: BBox, before, after, verb: str):
+        self.doc, self.uid, self.bbox, self.before, self.after = doc, uid, bbox, before, after
+        self.text = f"{verb} {doc.target(uid).name!r}"
+
+    def _set(self, values) -> None:
+        y0, y1, x0, x1 = self.bbox
+        self.doc.target(self.uid).mask[y0:y1, x0:x1] = values
+        self.doc.events.mask.emit(self.uid, self.bbox)
+
+    def redo(self) -> None:
+        self._set(self.after)
+
+    def undo(self) -> None:
+        self._set(self.before)
+
+
+class _Invert:
+    def __init__(self, doc: Document, uid: int):
+        self.doc, self.uid = doc, uid
+        self.text = f"Invert {doc.target(uid).name!r}"
+
+    def redo(self) -> None:
+        t = self.doc.target(self.uid)
+        np.logical_not(t.mask, out=t.mask)
+        self.doc.events.mask.emit(self.uid, (0, self.doc.shape[0], 0, self.doc.shape[1]))
+
+    undo = redo
+
+
+class _Kappa:
+    def __init__(self, doc: Document, uid: int, old, new):
+        self.doc, self.uid, self.old, self.new = doc, uid, np.array(old), np.array(new)
+        self.text = f"Albedo {doc.target(uid).name!r}"
+
+    def redo(self) -> None:
+        self.doc._apply_kappa(self.uid, self.new)
+
+    def undo(self) -> None:
+        self.doc._apply_kappa(self.uid, self.old)
+
+
+class _AddTarget:
+    def __init__(self, doc: Document, target: Target, index: int):
+        self.doc, self.t, self.i = doc, target, index
+        self.previous = doc.current
+        self.text = f"Add target {target.name!r}"
+
+    def redo(self) -> None:
+        self.doc.targets.insert(self.i, self.t)
+        self.doc.events.targets.emit()
+        self.doc.set_current(self.t.uid)
+
+    def undo(self) -> None:
+        self.doc.targets.remove(self.t)
+        self.doc.events.targets.emit()
+        self.doc.set_current(self.previous if self.doc._has(self.previous) else -1)
+
+
+class _RemoveTarget(_AddTarget):
+    def __init__(self, doc: Document, target: Target, index: int):
+        super().__init__(doc, target, index)
+        self.text = f"Delete target {target.name!r}"
+
+    def redo(self) -> None:
+        _AddTarget.undo(self)
+        if self.doc.current == -1 and self.doc.targets:
+            self.doc.set_current(self.doc.targets[min(self.i, len(self.doc.targets) - 1)].uid)
+
+    def undo(self) -> None:
+        _AddTarget.redo(self)
+
+
+class _Rename:
+    def __init__(self, doc: Document, uid: int, old: str, new: str):
+        self.doc, self.uid, self.old, self.new = doc, uid, old, new
+        self.text = f"Rename {old!r} to {new!r}"
+
+    def redo(self) -> None:
+        self.doc.target(self.uid).name = self.new
+        self.doc.events.targets.emit()
+
+    def undo(self) -> None:
+        self.doc.target(self.uid).name = self.old
+        self.doc.events.targets.emit()
+
+
+class _Move:
+    def __init__(self, doc: Document, uid: int, old: int, new: int):
+        self.doc, self.uid, self.old, self.new = doc, uid, old, new
+        self.text = f"Move {doc.target(uid).name!r}"
+
+    def _to(self, i: int) -> None:
+        t = self.doc.target(self.uid)
+        self.doc.targets.remove(t)
+        self.doc.targets.insert(i, t)
+        self.doc.events.targets.emit()
+
+    def redo(self) -> None:
+        self._to(self.new)
+
+    def undo(self) -> None:
+        self._to(self.old)

@@ -1,0 +1,379 @@
+"""Painting target masks from plain mouse events, without Qt.
+
+The canvas turns Qt mouse events into :class:`MouseEvent` (image coordinates, float, pixel
+``(i, j)`` covering ``j <= x < j + 1``, ``i <= y < i + 1``) and hands them to a
+:class:`Painter`, which edits the :class:`~app.model.document.Document`. Tests drive the painter with
+the same plain events, no window needed (napari's ``_labels_mouse_bindings`` pattern).
+
+One drag is one undo step: a brush drag opens a stroke on press and closes it on release,
+and the document records the stroke's bounding box and old values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import cv2
+import numpy as np
+
+from app.model.document import BBox, Document
+from engine.errors import InputError
+
+
+class Tool(StrEnum):
+    """Mask tools."""
+
+    BRUSH = "brush"
+    ERASER = "eraser"
+    POLYGON = "polygon"
+    LASSO = "lasso"
+    FILL = "fill"
+
+
+class EventType(StrEnum):
+    PRESS = "press"
+    MOVE = "move"
+    RELEASE = "release"
+    DOUBLE_CLICK = "double_click"
+
+
+@dataclass(frozen=True)
+class MouseEvent:
+    """A mouse event in image coordinates.
+
+    ``subtract`` (Alt held, or the right button) makes add-type tools remove pixels.
+    """
+
+    type: EventType
+    x: float
+    y: float
+    buttons: frozenset[str] = field(default_factory=lambda: frozenset({"left"}))
+    subtract: bool = False
+
+
+def press(x, y, **kw) -> MouseEvent:
+    """Shorthand for a left-button press at (x, y)."""
+    return MouseEvent(EventType.PRESS, float(x), float(y), **kw)
+
+
+def move(x, y, **kw) -> MouseEvent:
+    """Shorthand for a move with the left button held."""
+    return MouseEvent(EventType.MOVE, float(x), float(y), **kw)
+
+
+def release(x, y, **kw) -> MouseEvent:
+    """Shorthand for a left-button release."""
+    return MouseEvent(EventType.RELEASE, float(x), float(y), buttons=frozenset(), **kw)
+
+
+def capsule(p0: tuple[float, float], p1: tuple[float, float], radius: float, shape: tuple[int, int]):
+    """Pixels within ``radius`` of the segment p0–p1 (x, y), and the pixels containing p0, p1.
+
+    Parameters
+    ----------
+    p0, p1 : (x, y) float
+        Segment end points in image coordinates.
+    radius : float
+        Brush radius in pixels (half the brush size).
+    shape : (H, W)
+        Image shape; the result is clipped to it.
+
+    Returns
+    -------
+    bbox : (y0, y1, x0, x1) or None
+        Bounding box of the stamp inside the image (None if it misses the image).
+    stamp : (y1 - y0, x1 - x0) bool
+
+    Examples
+    --------
+    >>> bbox, stamp = capsule((2.5, 2.5), (2.5, 2.5), 1.0, (5, 5))
+    >>> bbox
+    (1, 4, 1, 4)
+    >>> stamp.astype(int)
+    array([[0, 1, 0],
+           [1, 1, 1],
+           [0, 1, 0]])
+    """
+    (ax, ay), (bx, by) = p0, p1
+    h, w = shape
+    y0 = max(int(np.floor(min(ay, by) - radius)), 0)
+    y1 = min(int(np.floor(max(ay, by) + radius)) + 1, h)
+    x0 = max(int(np.floor(min(ax, bx) - radius)), 0)
+    x1 = min(int(np.floor(max(ax, bx) + radius)) + 1, w)
+    if y0 >= y1 or x0 >= x1:
+        return None, None
+    yy = (np.arange(y0, y1, dtype=np.float64) + 0.5)[:, None]
+    xx = (np.arange(x0, x1, dtype=np.float64) + 0.5)[None, :]
+    dx, dy = bx - ax, by - ay
+    seg2 = dx * dx + dy * dy
+    if seg2 > 0:
+        t = np.clip(((xx - ax) * dx + (yy - ay) * dy) / seg2, 0.0, 1.0)
+    else:
+        t = np.zeros((1, 1))
+    ex, ey = xx - (ax + t * dx), yy - (ay + t * dy)
+    stamp = ex * ex + ey * ey <= radius * radius
+    for px, py in (p0, p1):  # a brush always paints the pixel under the cursor
+        j, i = int(np.floor(px)) - x0, int(np.floor(py)) - y0
+        if 0 <= i < y1 - y0 and 0 <= j < x1 - x0:
+            stamp[i, j] = True
+    return (y0, y1, x0, x1), stamp
+
+
+def polygon_mask(points, shape: tuple[int, int]):
+    """Rasterise a closed polygon (x, y vertices in image coordinates) to its bbox and stamp.
+
+    A pixel is inside when its centre is (even-odd rule, scanline per pixel row), so a
+    rectangle from (0, 0) to (4, 4) covers exactly the 4×4 pixels under it.
+
+    Examples
+    --------
+    >>> polygon_mask([(0, 0), (4, 0), (4, 4), (0, 4)], (10, 10))[1].sum()
+    np.int64(16)
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[0] < 3 or pts.shape[1] != 2:
+        raise InputError(f"a polygon needs at least 3 (x, y) points, got shape {pts.shape}")
+    h, w = shape
+    x0 = max(int(np.floor(pts[:, 0].min())), 0)
+    x1 = min(int(np.ceil(pts[:, 0].max())) + 1, w)
+    y0 = max(int(np.floor(pts[:, 1].min())), 0)
+    y1 = min(int(np.ceil(pts[:, 1].max())) + 1, h)
+    if y0 >= y1 or x0 >= x1:
+        return None, None
+    ax, ay = pts[:, 0], pts[:, 1]
+    bx, by = np.roll(ax, -1), np.roll(ay, -1)
+    stamp = np.zeros((y1 - y0, x1 - x0), bool)
+    for i in range(y1 - y0):
+        yc = y0 + i + 0.5
+        crossing = (ay <= yc) != (by <= yc)
+        if not crossing.any():
+            continue
+        ca = np.flatnonzero(crossing)
+        xs = np.sort(ax[ca] + (yc - ay[ca]) * (bx[ca] - ax[ca]) / (by[ca] - ay[ca]))
+        # pixel j is inside a span [xl, xr) when its centre j + 0.5 is
+        starts = np.clip(np.ceil(xs[0::2] - 0.5).astype(np.int64) - x0, 0, x1 - x0)
+        stops = np.clip(np.ceil(xs[1::2] - 0.5).astype(np.int64) - x0, 0, x1 - x0)
+        for a, b in zip(starts, stops):
+            stamp[i, a:b] = True
+    return (y0, y1, x0, x1), stamp
+
+
+def similar_region(image: np.ndarray, x: float, y: float, tolerance: float) -> np.ndarray:
+    """Pixels connected to (x, y) whose colour is within ``tolerance`` of the seed's.
+
+    Colours are compared in log radiance (so a tolerance of 0.1 means about ±10 % per channel,
+    in shadows and highlights alike), against the seed pixel, 4-connected.
+
+    Parameters
+    ----------
+    image : (H, W, 3) float32
+        Linear radiance.
+    x, y : float
+        Seed in image coordinates.
+    tolerance : float
+        Maximum |log(c) − log(c_seed)| per channel.
+
+    Returns
+    -------
+    (H, W) bool
+    """
+    return _similar_from_log(_log_image(image), x, y, tolerance)
+
+
+def _log_image(image: np.ndarray) -> np.ndarray:
+    floor = max(float(np.percentile(image, 99.5)) * 1e-4, 1e-12)
+    return np.log(np.maximum(image, floor)).astype(np.float32)
+
+
+class Painter:
+    """Turns mouse events into mask edits on the document's current target.
+
+    Parameters
+    ----------
+    document : Document
+    image : (H, W, 3) float32, optional
+        What "fill by similar colour" compares; default the photograph.
+
+    Attributes
+    ----------
+    tool : Tool
+    size : float
+        Brush diameter in camera pixels.
+    tolerance : float
+        Fill tolerance in log radiance.
+    polygon : list of (x, y)
+        Vertices of the polygon or lasso being drawn (for the canvas to show).
+    """
+
+    MIN_SIZE, MAX_SIZE = 1.0, 1000.0
+
+    def __init__(self, document: Document, *, image: np.ndarray | None = None):
+        self.doc = document
+        self.image = document.photograph if image is None else image
+        self.tool = Tool.BRUSH
+        self.size = 20.0
+        self.tolerance = 0.1
+        self.polygon: list[tuple[float, float]] = []
+        self._last: tuple[float, float] | None = None
+        self._erasing = False
+        self._log: np.ndarray | None = None
+        self._log_source: np.ndarray | None = None
+
+    # ------------------------------------------------------------ settings
+    def set_tool(self, tool: Tool | str) -> None:
+        self.cancel()
+        self.tool = Tool(tool)
+
+    def set_size(self, size: float) -> None:
+        """Brush diameter, clamped to MIN_SIZE..MAX_SIZE (a UI setting, not data)."""
+        self.size = float(min(max(size, self.MIN_SIZE), self.MAX_SIZE))
+
+    def grow(self) -> None:
+        """``]``: brush 25 % larger (at least one pixel)."""
+        self.set_size(max(self.size * 1.25, self.size + 1))
+
+    def shrink(self) -> None:
+        """``[``: brush 20 % smaller (at least one pixel)."""
+        self.set_size(min(self.size / 1.25, self.size - 1))
+
+    # ------------------------------------------------------------ events
+    def handle(self, event: MouseEvent) -> bool:
+        """Apply one event; returns True when it was consumed (the canvas then repaints).
+
+        Refused edits (e.g. the mask of an acquired target) are reported through the
+        document's ``warning`` signal, never raised into the UI's event handler.
+        """
+        try:
+            return self._handle(event)
+        except InputError as exc:
+            self.polygon, self._last = [], None
+            self.doc.events.warning.emit(str(exc))
+            return False
+
+    def _handle(self, event: MouseEvent) -> bool:
+        uid = self.doc.current
+        if uid == -1:
+            if event.type == EventType.PRESS:
+                self.doc.events.warning.emit("add or select a target before painting")
+            return False
+        if self.tool in (Tool.BRUSH, Tool.ERASER):
+            return self._brush(uid, event)
+        if self.tool == Tool.LASSO:
+            return self._lasso(uid, event)
+        if self.tool == Tool.POLYGON:
+            return self._polygon(uid, event)
+        if self.tool == Tool.FILL and event.type == EventType.PRESS:
+            self.fill(uid, event.x, event.y, subtract=event.subtract)
+            return True
+        return False
+
+    def cancel(self) -> None:
+        """Escape: drop an unfinished polygon/lasso; close an open stroke."""
+        self.polygon = []
+        self._last = None
+        self.doc.end_stroke()
+
+    def close_polygon(self, *, subtract: bool = False) -> None:
+        """Enter / double click: fill the polygon being drawn into the current target."""
+        pts, self.polygon = self.polygon, []
+        if len(pts) >= 3 and self.doc.current != -1:
+            self._fill_polygon(self.doc.current, pts, subtract)
+
+    def fill(self, uid: int, x: float, y: float, *, subtract: bool = False) -> None:
+        """Add (or remove) the connected region of similar colour around (x, y)."""
+        if self._log is None or self._log_source is not self.image:
+            self._log, self._log_source = _log_image(self.image), self.image
+        region = _similar_from_log(self._log, x, y, self.tolerance)
+        self._apply_region(uid, region, subtract, "Fill")
+
+    # ------------------------------------------------------------ tools
+    def _brush(self, uid: int, e: MouseEvent) -> bool:
+        if e.type == EventType.PRESS:
+            self._erasing = self.tool == Tool.ERASER or e.subtract
+            self.doc.begin_stroke(uid)
+            self._last = (e.x, e.y)
+            self._stamp(uid, (e.x, e.y), (e.x, e.y))
+            return True
+        if self._last is None:
+            return False  # hover
+        if e.type == EventType.MOVE:
+            self._stamp(uid, self._last, (e.x, e.y))
+            self._last = (e.x, e.y)
+            return True
+        if e.type == EventType.RELEASE:
+            self._stamp(uid, self._last, (e.x, e.y))
+            self._last = None
+            self.doc.end_stroke()
+            return True
+        return False
+
+    def _stamp(self, uid: int, p0, p1) -> None:
+        bbox, stamp = capsule(p0, p1, self.size / 2.0, self.doc.shape)
+        if bbox is not None:
+            self.doc.paint(uid, bbox, stamp, not self._erasing)
+
+    def _lasso(self, uid: int, e: MouseEvent) -> bool:
+        if e.type == EventType.PRESS:
+            self.polygon = [(e.x, e.y)]
+            self._erasing = e.subtract
+            return True
+        if not self.polygon:
+            return False
+        if e.type == EventType.MOVE:
+            last = self.polygon[-1]
+            if (e.x - last[0]) ** 2 + (e.y - last[1]) ** 2 >= 0.25:
+                self.polygon.append((e.x, e.y))
+            return True
+        if e.type == EventType.RELEASE:
+            self.polygon.append((e.x, e.y))
+            pts, self.polygon = self.polygon, []
+            if len(pts) >= 3:
+                self._fill_polygon(uid, pts, self._erasing)
+            return True
+        return False
+
+    def _polygon(self, uid: int, e: MouseEvent) -> bool:
+        if e.type == EventType.DOUBLE_CLICK:
+            self.close_polygon(subtract=e.subtract)
+            return True
+        if e.type == EventType.PRESS:
+            if len(self.polygon) >= 3:
+                fx, fy = self.polygon[0]
+                if (e.x - fx) ** 2 + (e.y - fy) ** 2 <= 4.0:  # clicked the first vertex
+                    self.close_polygon(subtract=e.subtract)
+                    return True
+            self.polygon.append((e.x, e.y))
+            return True
+        return False
+
+    def _fill_polygon(self, uid: int, pts, subtract: bool) -> None:
+        bbox, stamp = polygon_mask(pts, self.doc.shape)
+        if bbox is None:
+            return
+        self._apply_region(uid, stamp, subtract, "Polygon", bbox=bbox)
+
+    def _apply_region(self, uid: int, region: np.ndarray, subtract: bool, text: str, *, bbox: BBox | None = None):
+        if bbox is None:
+            rows = np.flatnonzero(region.any(axis=1))
+            if rows.size == 0:
+                return
+            cols = np.flatnonzero(region.any(axis=0))
+            bbox = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1)
+            region = region[bbox[0] : bbox[1], bbox[2] : bbox[3]]
+        y0, y1, x0, x1 = bbox
+        old = self.doc.target(uid).mask[y0:y1, x0:x1]
+        new = old & ~region if subtract else old | region
+        self.doc.set_mask_region(uid, bbox, new, text)
+
+
+def _similar_from_log(logimg: np.ndarray, x: float, y: float, tolerance: float) -> np.ndarray:
+    h, w = logimg.shape[:2]
+    j, i = int(np.floor(x)), int(np.floor(y))
+    if not (0 <= i < h and 0 <= j < w):
+        return np.zeros((h, w), bool)
+    mask = np.zeros((h + 2, w + 2), np.uint8)
+    tol = (float(tolerance),) * 3
+    flags = 4 | cv2.FLOODFILL_MASK_ONLY | cv2.FLOODFILL_FIXED_RANGE | (1 << 8)
+    cv2.floodFill(logimg, mask, (j, i), (0, 0, 0), tol, tol, flags)
+    return mask[1:-1, 1:-1].astype(bool)

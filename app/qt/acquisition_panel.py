@@ -1,0 +1,464 @@
+"""The acquisition panel: capture a target (or a cascade of targets) into a calibrated session.
+
+A dockable widget over :func:`engine.workflow.run_capture`. The caller gives the rig, the
+session and the targets in cascade order with the fixed κ of all but the last; the panel
+offers the order, adaptive capture (Sec. 5), per-channel or RGB emission and frame averaging,
+runs the capture on a worker with progress, time left, pause and cancel, and shows each
+capture as a thumbnail as it arrives. Every finished capture is already in the session, so
+a cancel, a crash or a quit loses nothing: Resume (or a new panel on the same session) runs
+the same plan again and the session serves back what it holds.
+"""
+
+from __future__ import annotations
+
+import html
+
+import numpy as np
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QComboBox,
+    QDoubleSpinBox,
+    QFormLayout,
+    QHBoxLayout,
+    QLabel,
+    QMessageBox,
+    QPushButton,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.qt.rig_views import ProgressEta, ThumbnailStrip, finish_job, rig_lock, worker_rig
+from app.qt.worker import Job, UiCaller
+from engine.acquire import Adaptive, CaptureSettings
+from engine.calibrate.graycode import fill_correspondence
+from engine.errors import InputError, SessionError
+from engine.progress import checkpoint
+from engine.workflow import estimated_report, load_calibration, run_capture
+
+__all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
+
+#: Adaptive-capture choices: (label, engine policy).
+POLICIES = (("brute force (capture everything)", "brute"), ("linear prediction (paper)", "linear"),
+            ("span prediction", "span"))
+_EMISSIONS = (("one primary at a time (3 shots per step)", True), ("RGB at once, crosstalk-corrected", False))
+_RED = "#c0392b"
+
+
+def _esc(text: str) -> str:
+    """Escape text for a rich-text label (quotes stay readable)."""
+    return html.escape(text, quote=False)
+
+
+def unreachable_pixels(calibration, mask: np.ndarray) -> np.ndarray:
+    """Target pixels the projector cannot reach: no correspondence, even after filling.
+
+    Undecoded pixels surrounded by decoded ones of the same target (concave corners) get a
+    projector pixel from their neighbours (:func:`engine.calibrate.graycode.fill_correspondence`);
+    the rest cannot be re-lit and make a target unusable.
+
+    Parameters
+    ----------
+    calibration : engine.calibrate.Calibration
+    mask : (H, W) bool
+
+    Returns
+    -------
+    (H, W) bool
+    """
+    mask = np.asarray(mask, bool)
+    filled, _ = fill_correspondence(calibration.correspondence, mask)
+    return mask & ~filled.valid
+
+
+def _acquire(rig, session, targets, order, *, caller, progress=None, should_stop=None, **options):
+    """Job body: take the rig's lock, then :func:`run_capture` with the projector on the UI thread."""
+    lock = rig_lock(rig)
+    while not lock.acquire(timeout=0.05):
+        checkpoint(should_stop, "acquisition")
+    try:
+        return run_capture(worker_rig(rig, caller), session, targets, order, progress=progress,
+                           should_stop=should_stop, **options)
+    finally:
+        lock.release()
+
+
+class AcquisitionPanel(QWidget):
+    """Acquire the observations of the last of some targets (Sec. 3.3–5), on a worker.
+
+    Parameters
+    ----------
+    rig : devices.base.Rig, optional
+        An open rig (the panel never closes it).
+    session : engine.session.Session, optional
+        A session holding the rig's calibration (see :class:`app.qt.calibration_wizard.CalibrationWizard`).
+    targets : sequence of (str, (H, W) bool)
+        Targets in cascade order; the last one is acquired, the others are recolored by their
+        ``fixed_kappa`` first (Sec. 4).
+    fixed_kappa : sequence of float or (3,)
+        κ of every target but the last.
+    parent : QWidget, optional
+    synchronous : bool
+        Run the capture on the UI thread (tests).
+    thumb_size : int
+        Thumbnail side in pixels.
+
+    Signals
+    -------
+    acquired(object)
+        The :class:`engine.acquire.CascadeResult`; its decomposition is cached in the session
+        (:func:`engine.workflow.load_decomposition`).
+    failed(object)
+        The exception of a failed run (also shown in a dialog).
+    cancelled()
+        A run stopped on Cancel; its captures stay in the session.
+    refused(str)
+        Start was refused (also shown in a dialog): the reason.
+    started(object)
+        The :class:`app.qt.worker.Job` of a run.
+    busy_changed(bool)
+        A run started / ended (the main window locks editing meanwhile).
+    thumbnail_added(str)
+        A capture's thumbnail arrived (its name).
+    """
+
+    acquired = Signal(object)
+    failed = Signal(object)
+    cancelled = Signal()
+    refused = Signal(str)
+    started = Signal(object)
+    busy_changed = Signal(bool)
+    thumbnail_added = Signal(str)
+    _thumbnail_ready = Signal(str, object)
+
+    title = "Acquisition"
+
+    def __init__(self, rig=None, session=None, targets=(), fixed_kappa=(), *, parent: QWidget | None = None,
+                 synchronous: bool = False, thumb_size: int = 72):
+        super().__init__(parent)
+        self.synchronous = bool(synchronous)
+        self.ui = UiCaller(self)
+        self.rig = rig
+        self.session = None
+        self.targets: list[tuple[str, np.ndarray]] = []
+        self.fixed_kappa: list = []
+        self.job: Job | None = None
+        self._cancelling = False
+        self._left_out: list[str] = []
+        self.result = None
+
+        self.order = QSpinBox(minimum=1, maximum=8, value=4)
+        self.order.setToolTip("K: the photograph plus K−1 re-emissions per target (a K-th order decomposition)")
+        self.policy = QComboBox()
+        for label, _ in POLICIES:
+            self.policy.addItem(label)
+        self.threshold = QDoubleSpinBox(decimals=2, minimum=0.01, maximum=50.0, value=1.0, suffix=" %")
+        self.threshold.setToolTip("relative error accepted for a predicted capture (paper: 1 %)")
+        self.emission = QComboBox()
+        for label, _ in _EMISSIONS:
+            self.emission.addItem(label)
+        self.frames = QSpinBox(minimum=1, maximum=256, value=1)
+        self.frames.setToolTip("frames averaged per capture: noise falls as 1/√frames")
+        self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach")
+        self.leave_out.setToolTip("otherwise Start refuses a target with such pixels; left-out pixels keep "
+                                  "their colour when the target is recolored")
+        form = QFormLayout()
+        form.addRow("Order", self.order)
+        form.addRow("Adaptive", self.policy)
+        form.addRow("Threshold", self.threshold)
+        form.addRow("Emission", self.emission)
+        form.addRow("Frames averaged", self.frames)
+        form.addRow(self.leave_out)
+
+        self.targets_label = QLabel()
+        self.targets_label.setWordWrap(True)
+        self.start_button = QPushButton("Start")
+        self.pause_button = QPushButton("Pause")
+        self.pause_button.setCheckable(True)
+        self.cancel_button = QPushButton("Cancel")
+        buttons = QHBoxLayout()
+        for b in (self.start_button, self.pause_button, self.cancel_button):
+            buttons.addWidget(b)
+        self.eta = ProgressEta(unit="captures", stacked=True)
+        self.thumbnails = ThumbnailStrip(size=thumb_size)
+        self.status = QLabel()
+        self.status.setWordWrap(True)
+
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.targets_label)
+        lay.addLayout(form)
+        lay.addLayout(buttons)
+        lay.addWidget(self.eta)
+        lay.addWidget(self.thumbnails)
+        lay.addWidget(self.status)
+        lay.addStretch(1)
+
+        self.policy.currentIndexChanged.connect(self._update)
+        self.start_button.clicked.connect(self.start)
+        self.pause_button.toggled.connect(self._on_pause_toggled)
+        self.cancel_button.clicked.connect(self.cancel)
+        self._thumbnail_ready.connect(self._on_thumbnail)
+        self.set_targets(targets, fixed_kappa)
+        self.set_session(session)
+
+    # ------------------------------------------------------------------ inputs
+    @property
+    def busy(self) -> bool:
+        return self.job is not None and self.job.running
+
+    def set_rig(self, rig) -> None:
+        """Use ``rig`` for the next run (not while one runs)."""
+        if self.busy:
+            raise InputError("cannot change the rig while an acquisition runs")
+        self.rig = rig
+        self._update()
+
+    def set_session(self, session) -> None:
+        """Use ``session``; an interrupted plan in it sets the controls so Resume continues it."""
+        if self.busy:
+            raise InputError("cannot change the session while an acquisition runs")
+        self.session = session
+        self.status.clear()
+        plan = None if session is None else session.state.get("plan")
+        if plan:
+            self.order.setValue(int(plan["order"]))
+            self.emission.setCurrentIndex(0 if plan["settings"].get("per_channel", True) else 1)
+            adaptive = plan.get("adaptive")
+            policy = "brute" if adaptive is None else adaptive["policy"]
+            self.policy.setCurrentIndex([p for _, p in POLICIES].index(policy))
+            if adaptive is not None:
+                self.threshold.setValue(100.0 * float(adaptive["threshold"]))
+            kept = len(self._plan_captures())
+            if session.state.get("status") == "captured":
+                self._note(f"This session holds an acquisition of {', '.join(plan['targets'])} "
+                           f"(order {plan['order']}); Start shows it again without new captures.")
+            else:
+                self._note(f"An interrupted acquisition of {', '.join(plan['targets'])} (order {plan['order']}) "
+                           f"is in this session with {kept} captures: Resume continues it.")
+        self._update()
+
+    def set_targets(self, targets, fixed_kappa=()) -> None:
+        """Targets in cascade order as (name, mask), and the fixed κ of all but the last."""
+        if self.busy:
+            raise InputError("cannot change the targets while an acquisition runs")
+        self.targets = [(str(n), np.array(m, bool)) for n, m in targets]
+        self.fixed_kappa = [np.broadcast_to(np.asarray(k, float), (3,)).copy() for k in fixed_kappa]
+        self._update()
+
+    # ------------------------------------------------------------------ settings
+    def capture_settings(self) -> CaptureSettings:
+        return CaptureSettings(per_channel=_EMISSIONS[self.emission.currentIndex()][1])
+
+    def adaptive(self) -> Adaptive | None:
+        policy = POLICIES[self.policy.currentIndex()][1]
+        return None if policy == "brute" else Adaptive(policy, self.threshold.value() / 100.0)
+
+    def _plan(self) -> dict:
+        """The plan :func:`run_capture` will store (compared with the session's before a run)."""
+        from engine.workflow import capture_plan
+
+        return capture_plan(
+            self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
+            settings=self.capture_settings(), adaptive=self.adaptive(),
+        )
+
+    def _plan_captures(self) -> list[str]:
+        if self.session is None:
+            return []
+        return [c.name for c in self.session.captures if c.name.startswith("acq-")]
+
+    def check_ready(self) -> str:
+        """Why a run cannot start now, in plain words; ``""`` when it can."""
+        return self._prepare()[0]
+
+    def _prepare(self) -> tuple[str, list, dict[str, int]]:
+        """(refusal reason or "", the targets to acquire, pixels left out per target)."""
+        if self.busy:
+            return f"{self.job.name} is still running.", [], {}
+        if self.rig is None:
+            return "No rig is open: open and calibrate one first (Calibrate the rig…).", [], {}
+        if self.session is None:
+            return "No session: calibrate the rig into a session first (Calibrate the rig…).", [], {}
+        try:
+            calibration = load_calibration(self.session)
+            calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
+                                         tuple(self.rig.projector.resolution))
+        except (SessionError, InputError) as exc:
+            return f"{exc}. Calibrate the rig into this session first (Calibrate the rig…).", [], {}
+        if not self.targets:
+            return "There is no target to acquire: paint one first.", [], {}
+        if len(self.fixed_kappa) != len(self.targets) - 1:
+            return (f"A cascade of {len(self.targets)} targets needs the fixed κ of the first "
+                    f"{len(self.targets) - 1}, got {len(self.fixed_kappa)}."), [], {}
+        targets, left_out = [], {}
+        for name, mask in self.targets:
+            if mask.shape != calibration.camera_resolution:
+                return (f"Target {name!r} is {mask.shape[1]}×{mask.shape[0]} pixels but the camera is "
+                        f"{calibration.camera_resolution[1]}×{calibration.camera_resolution[0]}."), [], {}
+            if not mask.any():
+                return f"Target {name!r} is empty: paint it first.", [], {}
+            bad = unreachable_pixels(calibration, mask)
+            if bad.any() and (not self.leave_out.isChecked() or bad.sum() == mask.sum()):
+                counts = calibration.correspondence.counts(bad)
+                why = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if n and k != "decoded")
+                return (f"Target {name!r}: {int(bad.sum())} of {int(mask.sum())} painted pixels cannot be reached "
+                        f"by the projector ({why}). Erase them from the target (the calibration's coverage map "
+                        "shows where the projector reaches), or move the projector and recalibrate."), [], {}
+            if bad.any():
+                left_out[name] = int(bad.sum())
+                mask = mask & ~bad
+            targets.append((name, mask))
+        previous = self.session.state.get("plan")
+        if previous is not None:
+            if previous != self._plan():
+                return (f"This session already holds a different acquisition plan (targets "
+                        f"{previous.get('targets')}, order {previous.get('order')}): set the same controls to "
+                        "resume it, or acquire into a new session folder."), [], {}
+            for name, mask in targets:
+                if name in self.session.masks and not np.array_equal(self.session.read_mask(name), mask):
+                    return (f"Target {name!r} was painted differently when this session's acquisition began: "
+                            "acquire the new mask into a new session folder."), [], {}
+        return "", targets, left_out
+
+    # ------------------------------------------------------------------ run
+    def start(self) -> Job | None:
+        """Start (or resume) the acquisition; None and a dialog if it cannot start."""
+        reason, targets, left_out = self._prepare()
+        if reason:
+            self._note(reason, error=True)
+            self.refused.emit(reason)
+            QMessageBox.warning(self, "Cannot start the acquisition", reason)
+            return None
+        self.result = None
+        self.eta.reset()
+        self.pause_button.setChecked(False)
+        size = self.thumbnails.thumb_size
+        self.thumbnails.clear()
+
+        def on_capture(name, image):  # worker thread: downscale there, paint on the UI thread
+            self._thumbnail_ready.emit(name, ThumbnailStrip.make_thumbnail(image, size))
+
+        resumed = len(self._plan_captures())
+        job = Job(_acquire, self.rig, self.session, targets, int(self.order.value()),
+                  caller=self.ui, fixed_kappa=[k.copy() for k in self.fixed_kappa],
+                  settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
+                  on_capture=on_capture, name="Acquiring", synchronous=self.synchronous)
+        job.progress.connect(self.eta.update_progress)
+        job.paused.connect(self._on_paused)
+        job.finished.connect(self._on_finished)
+        job.failed.connect(self._on_failed)
+        job.cancelled.connect(self._on_cancelled)
+        job.ended.connect(lambda: self._on_ended(job))
+        self.job = job
+        self._cancelling = False
+        notes = [f"{resumed} captures already in the session are reused." if resumed else "Acquiring…"]
+        self._left_out = [f"{n} pixels of {name!r} the projector cannot reach were left out."
+                          for name, n in left_out.items()]
+        notes += self._left_out
+        self._note("\n".join(notes))
+        self.busy_changed.emit(True)
+        self.started.emit(job)
+        job.start()
+        if self.busy:  # threaded: lock the controls until it ends (a synchronous run has ended already)
+            self._update()
+        return job
+
+    def pause(self) -> None:
+        """Hold the run before its next capture (the projector keeps its pattern)."""
+        if self.busy and not self._cancelling:  # a pause after a cancel would hold the worker forever
+            self.job.pause()
+
+    def resume(self) -> None:
+        """Continue a paused run."""
+        if self.busy:
+            self.job.resume()
+
+    def cancel(self) -> None:
+        """Stop the run at the next capture; what was captured stays in the session."""
+        if self.busy:
+            self._cancelling = True
+            self.job.cancel()
+
+    def shutdown(self, *, timeout: float = 15.0) -> bool:
+        """Cancel any run and wait for it to stop (captures taken are kept); True once idle.
+
+        Called by :meth:`closeEvent`; call it before deleting a panel that was never shown.
+        """
+        if self.busy:
+            self._cancelling = True
+        return finish_job(self.job, timeout=timeout)
+
+    def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
+        self.shutdown()
+        super().closeEvent(event)
+
+    # ------------------------------------------------------------------ job signals (UI thread)
+    def _on_thumbnail(self, name: str, rgb) -> None:
+        self.thumbnails.add_thumbnail(name, rgb)
+        self.thumbnail_added.emit(name)
+
+    def _on_pause_toggled(self, on: bool) -> None:
+        self.pause() if on else self.resume()
+
+    def _on_paused(self, on: bool) -> None:
+        self.pause_button.blockSignals(True)
+        self.pause_button.setChecked(on)
+        self.pause_button.blockSignals(False)
+        self.pause_button.setText("Resume" if on else "Pause")
+        if on:
+            self.eta.set_note("paused")
+
+    def _on_finished(self, result) -> None:
+        self.result = result
+        lines = [f"Captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots)."]
+        lines += self._left_out + [f"{name}: {prepared.report()}" for name, prepared in result.targets]
+        if self.session is not None and (line := estimated_report(self.session)):
+            lines.append(line + ".")
+        self._note("\n".join(lines))
+        self.eta.set_note("done")
+        self.acquired.emit(result)
+
+    def _on_failed(self, exc) -> None:
+        message = str(exc) or type(exc).__name__
+        self._note(message, error=True)
+        self.failed.emit(exc)
+        QMessageBox.critical(self, "Acquisition failed", message)
+
+    def _on_cancelled(self, _exc) -> None:
+        kept = len(self._plan_captures())
+        self._note(f"Cancelled. The {kept} captures taken so far are kept in the session: Resume continues "
+                   "where it stopped.")
+        self.eta.set_note("cancelled")
+        self.cancelled.emit()
+
+    def _on_ended(self, job: Job) -> None:
+        if self.job is job:
+            self.job = None
+        self._on_paused(False)
+        self._update()
+        self.busy_changed.emit(False)
+
+    # ------------------------------------------------------------------ display
+    def _note(self, text: str, *, error: bool = False) -> None:
+        body = _esc(text).replace("\n", "<br>")
+        self.status.setText(f"<span style='color:{_RED}'>{body}</span>" if error else body)
+
+    def _update(self) -> None:
+        busy = self.busy
+        for w in (self.order, self.policy, self.emission, self.frames, self.leave_out):
+            w.setEnabled(not busy)
+        self.threshold.setEnabled(not busy and POLICIES[self.policy.currentIndex()][1] != "brute")
+        self.start_button.setEnabled(not busy)
+        self.pause_button.setEnabled(busy)
+        self.cancel_button.setEnabled(busy)
+        interrupted = (self.session is not None and self.session.state.get("plan") is not None
+                       and self.session.state.get("status") != "captured" and bool(self._plan_captures()))
+        self.start_button.setText("Resume" if interrupted and not busy else "Start")
+        if self.targets:
+            parts = [f"{_esc(n)} (κ fixed {', '.join(f'{v:g}' for v in k)})"
+                     for (n, _), k in zip(self.targets[:-1], self.fixed_kappa)]
+            parts.append(f"<b>{_esc(self.targets[-1][0])}</b> (acquired, κ free)")
+            self.targets_label.setText("Targets: " + " → ".join(parts))
+        else:
+            self.targets_label.setText("No target yet: paint one.")

@@ -1,0 +1,372 @@
+"""Side panels: the target list (cascade order) and the albedo controls of the current target.
+
+Widgets only bind model ↔ control (napari's layer-controls pattern): a control writes the
+:class:`~app.model.document.Document`; the document's signal updates the control inside a signal
+blocker; nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from PySide6.QtCore import QSignalBlocker, Qt, Signal
+from PySide6.QtGui import QColor, QIcon, QPixmap
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QCheckBox,
+    QDoubleSpinBox,
+    QGridLayout,
+    QHBoxLayout,
+    QLabel,
+    QListWidget,
+    QListWidgetItem,
+    QMessageBox,
+    QPushButton,
+    QSlider,
+    QSpinBox,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.model.document import KAPPA_MAX, KAPPA_MIN, Document
+from engine.errors import InputError
+
+#: Slider ticks per doubling of κ (the slider is logarithmic).
+TICKS_PER_STOP = 100
+
+
+def kappa_to_ticks(kappa: float) -> int:
+    """Slider position of κ on the log scale (1 → 0, 2 → 100, 1/16 → -400).
+
+    Examples
+    --------
+    >>> kappa_to_ticks(2.0), kappa_to_ticks(1 / 16), kappa_to_ticks(100.0)
+    (100, -400, 400)
+    """
+    k = min(max(float(kappa), KAPPA_MIN), KAPPA_MAX)
+    return int(round(math.log2(k) * TICKS_PER_STOP))
+
+
+def ticks_to_kappa(ticks: int) -> float:
+    """κ at a slider position (inverse of :func:`kappa_to_ticks`).
+
+    Examples
+    --------
+    >>> ticks_to_kappa(-100), ticks_to_kappa(400)
+    (0.5, 16.0)
+    """
+    return float(2.0 ** (ticks / TICKS_PER_STOP))
+
+
+def _swatch(colour, size: int = 14) -> QIcon:
+    pm = QPixmap(size, size)
+    pm.fill(QColor(*colour))
+    return QIcon(pm)
+
+
+class TargetPanel(QWidget):
+    """List of targets in cascade order: add, rename (double click), delete, reorder."""
+
+    message = Signal(str)
+
+    def __init__(self, document: Document, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.doc = document
+        self.list = QListWidget()
+        self.list.setDragDropMode(QAbstractItemView.DragDropMode.InternalMove)
+        self.list.setDefaultDropAction(Qt.DropAction.MoveAction)
+        self.list.setEditTriggers(QAbstractItemView.EditTrigger.DoubleClicked | QAbstractItemView.EditTrigger.EditKeyPressed)
+        self.list.setToolTip("Targets in cascade order (first acquired first). Drag to reorder, double-click to rename.")
+        self.add_button = QToolButton(text="+", toolTip="Add a target")
+        self.remove_button = QToolButton(text="−", toolTip="Delete the selected target")
+        self.up_button = QToolButton(text="▲", toolTip="Move earlier in the cascade")
+        self.down_button = QToolButton(text="▼", toolTip="Move later in the cascade")
+        buttons = QHBoxLayout()
+        for b in (self.add_button, self.remove_button, self.up_button, self.down_button):
+            buttons.addWidget(b)
+        buttons.addStretch(1)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.list)
+        layout.addLayout(buttons)
+        self.add_button.clicked.connect(lambda: self._guard(self.doc.add_target))
+        self.remove_button.clicked.connect(self._remove)
+        self.up_button.clicked.connect(lambda: self._move(-1))
+        self.down_button.clicked.connect(lambda: self._move(+1))
+        self.list.currentItemChanged.connect(self._on_selected)
+        self.list.itemChanged.connect(self._on_item_changed)
+        self.list.model().rowsMoved.connect(self._on_rows_moved)
+        document.events.targets.connect(self.refresh)
+        document.events.current.connect(self._on_current)
+        document.events.acquisition.connect(self.refresh)
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Rebuild the list from the document."""
+        with QSignalBlocker(self.list), QSignalBlocker(self.list.model()):
+            self.list.clear()
+            for i, t in enumerate(self.doc.targets):
+                item = QListWidgetItem(_swatch(t.colour), t.name)
+                item.setData(Qt.ItemDataRole.UserRole, t.uid)
+                flags = item.flags() | Qt.ItemFlag.ItemIsEditable | Qt.ItemFlag.ItemIsDragEnabled
+                item.setFlags(flags & ~Qt.ItemFlag.ItemIsDropEnabled)
+                lock = self.doc.mask_lock(t.uid)
+                item.setToolTip(f"cascade position {i + 1}" + (f"\n{lock}" if lock else ""))
+                if lock:
+                    item.setText(f"{t.name}  (acquired)")
+                    item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
+                self.list.addItem(item)
+                if t.uid == self.doc.current:
+                    self.list.setCurrentItem(item)
+        self._update_buttons()
+
+    def _uid(self, item) -> int:
+        return -1 if item is None else int(item.data(Qt.ItemDataRole.UserRole))
+
+    def _update_buttons(self) -> None:
+        uid = self.doc.current
+        has = uid != -1
+        self.remove_button.setEnabled(has and not self.doc.mask_lock(uid))
+        movable = has and self.doc.acquisition is None
+        i = self.doc.index(uid) if has else -1
+        self.up_button.setEnabled(movable and i > 0)
+        self.down_button.setEnabled(movable and 0 <= i < len(self.doc.targets) - 1)
+
+    def _guard(self, fn, *args) -> None:
+        try:
+            fn(*args)
+        except InputError as exc:
+            self.message.emit(str(exc))
+            self.refresh()
+
+    def _remove(self) -> None:
+        uid = self.doc.current
+        if uid == -1:
+            return
+        self._guard(self.doc.remove_target, uid)
+
+    def _move(self, step: int) -> None:
+        uid = self.doc.current
+        if uid != -1:
+            self._guard(self.doc.move_target, uid, self.doc.index(uid) + step)
+
+    def _on_selected(self, item, _previous) -> None:
+        self.doc.set_current(self._uid(item))
+
+    def _on_current(self, uid: int) -> None:
+        with QSignalBlocker(self.list):
+            for row in range(self.list.count()):
+                if self._uid(self.list.item(row)) == uid:
+                    self.list.setCurrentRow(row)
+        self._update_buttons()
+
+    def _on_item_changed(self, item) -> None:
+        uid = self._uid(item)
+        if uid != -1 and item.text() != self.doc.target(uid).name:
+            self._guard(self.doc.rename_target, uid, item.text())
+
+    def _on_rows_moved(self, *_args) -> None:
+        order = [self._uid(self.list.item(r)) for r in range(self.list.count())]
+        for index, uid in enumerate(order):
+            if self.doc.index(uid) != index:
+                self._guard(self.doc.move_target, uid, index)
+                break
+        self.refresh()
+
+
+class AlbedoPanel(QWidget):
+    """κ of the current target: R, G, B log sliders with numeric entry, link toggle, reset.
+
+    A slider drag is one undo step (begin/end gesture); typing a value is one step. Earlier
+    cascade targets are locked after acquisition, with a tooltip saying why.
+    """
+
+    CHANNELS = ("R", "G", "B")
+
+    def __init__(self, document: Document, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.doc = document
+        self.uid = -1
+        grid = QGridLayout(self)
+        grid.setContentsMargins(0, 0, 0, 0)
+        self.title = QLabel("No target selected")
+        self.title.setWordWrap(True)
+        grid.addWidget(self.title, 0, 0, 1, 3)
+        self.sliders: list[QSlider] = []
+        self.spins: list[QDoubleSpinBox] = []
+        lo, hi = kappa_to_ticks(KAPPA_MIN), kappa_to_ticks(KAPPA_MAX)
+        for c, name in enumerate(self.CHANNELS):
+            label = QLabel(f"κ {name}")
+            slider = QSlider(Qt.Orientation.Horizontal)
+            slider.setRange(lo, hi)
+            slider.setPageStep(TICKS_PER_STOP // 4)
+            slider.setTickInterval(TICKS_PER_STOP)
+            slider.setTickPosition(QSlider.TickPosition.TicksBelow)
+            slider.setObjectName(f"kappa_{name}")
+            spin = QDoubleSpinBox()
+            spin.setRange(KAPPA_MIN, KAPPA_MAX)
+            spin.setDecimals(3)
+            spin.setStepType(QDoubleSpinBox.StepType.AdaptiveDecimalStepType)
+            spin.setKeyboardTracking(False)
+            spin.setObjectName(f"kappa_{name}_value")
+            grid.addWidget(label, c + 1, 0)
+            grid.addWidget(slider, c + 1, 1)
+            grid.addWidget(spin, c + 1, 2)
+            slider.sliderPressed.connect(self._begin)
+            slider.sliderReleased.connect(self._end)
+            slider.valueChanged.connect(lambda v, c=c: self._on_slider(c, v))
+            spin.valueChanged.connect(lambda v, c=c: self._on_spin(c, v))
+            self.sliders.append(slider)
+            self.spins.append(spin)
+        self.link = QCheckBox("Link channels")
+        self.link.setToolTip("Move R, G and B together (their ratios, i.e. the hue of the change, are kept)")
+        self.link.setChecked(True)
+        self.reset = QPushButton("Reset")
+        self.reset.setToolTip("κ = 1: the original albedo")
+        self.reset.clicked.connect(self._reset)
+        grid.addWidget(self.link, 4, 0, 1, 2)
+        grid.addWidget(self.reset, 4, 2)
+        self.note = QLabel()
+        self.note.setWordWrap(True)
+        self.note.setStyleSheet("color: palette(placeholder-text);")
+        grid.addWidget(self.note, 5, 0, 1, 3)
+        grid.setColumnStretch(1, 1)
+        ev = document.events
+        ev.current.connect(self._on_current)
+        ev.kappa.connect(self._on_kappa)
+        ev.targets.connect(lambda: self._on_current(self.doc.current))
+        ev.acquisition.connect(lambda: self._on_current(self.doc.current))
+        self._on_current(document.current)
+
+    # ------------------------------------------------------------------ model → controls
+    def _on_current(self, uid: int) -> None:
+        self.uid = uid
+        has = uid != -1
+        lock = self.doc.kappa_lock(uid) if has else ""
+        for w in (*self.sliders, *self.spins, self.reset, self.link):
+            w.setEnabled(has and not lock)
+            w.setToolTip(lock) if lock else None
+        if not lock:
+            self.reset.setToolTip("κ = 1: the original albedo")
+            for s in (*self.sliders, *self.spins):
+                s.setToolTip("Albedo scale κ of this channel (log scale, 1/16 … 16)")
+        if not has:
+            self.title.setText("No target selected")
+            self.note.setText("")
+            return
+        t = self.doc.target(uid)
+        self.title.setText(f"<b>{t.name}</b>" + (" — locked" if lock else ""))
+        self.setToolTip(lock)
+        acq = self.doc.acquisition
+        if lock:
+            self.note.setText(lock)
+        elif acq is None:
+            self.note.setText("Not acquired yet: κ takes effect in the recolored view after acquisition "
+                              "(the Ground truth view previews it on the virtual rig).")
+        elif uid not in acq.cascade:
+            self.note.setText("This target was added after the acquisition: acquire again to recolor it.")
+        else:
+            self.note.setText("Last target of the cascade: free to edit.")
+        self._show(t.kappa)
+
+    def _on_kappa(self, uid: int, kappa) -> None:
+        if uid == self.uid:
+            self._show(kappa)
+
+    def _show(self, kappa) -> None:
+        for c in range(3):
+            with QSignalBlocker(self.sliders[c]), QSignalBlocker(self.spins[c]):
+                self.sliders[c].setValue(kappa_to_ticks(kappa[c]))
+                self.spins[c].setValue(float(kappa[c]))
+
+    # ------------------------------------------------------------------ controls → model
+    def _begin(self) -> None:
+        if self.uid != -1:
+            self.doc.begin_kappa_gesture(self.uid)
+
+    def _end(self) -> None:
+        self.doc.end_kappa_gesture()
+
+    def _on_slider(self, channel: int, ticks: int) -> None:
+        self._set(channel, ticks_to_kappa(ticks))
+
+    def _on_spin(self, channel: int, value: float) -> None:
+        self._set(channel, float(value))
+
+    def _set(self, channel: int, value: float) -> None:
+        if self.uid == -1:
+            return
+        kappa = self.doc.target(self.uid).kappa.copy()
+        old = kappa[channel]
+        if self.link.isChecked() and old > 0:
+            # all channels by the same factor; the slider range is a UI limit, not data
+            kappa = np.clip(kappa * (value / old), KAPPA_MIN, KAPPA_MAX)
+        elif self.link.isChecked():
+            kappa[:] = value
+        kappa[channel] = value
+        try:
+            self.doc.set_kappa(self.uid, kappa)
+        except InputError as exc:
+            QMessageBox.warning(self, "Albedo", str(exc))
+            self._show(self.doc.target(self.uid).kappa)
+
+    def _reset(self) -> None:
+        if self.uid != -1:
+            self.doc.reset_kappa(self.uid)
+
+
+class NoiseReductionPanel(QWidget):
+    """Noise reduction of the acquired decomposition: a radius and Apply.
+
+    Recoloring multiplies the noise of interaction component i by κ^{i+1}; the filter
+    (:func:`engine.denoise.denoise_components`) smooths the interreflection components along
+    the photograph's edges and leaves κ = 1 unchanged. Applying it is a job of a few seconds
+    on large images, so it is asked for (:attr:`apply_requested`), not run on every change.
+
+    Signals
+    -------
+    apply_requested(int)
+        The radius to apply (0: back to the measured decomposition).
+    """
+
+    apply_requested = Signal(int)
+
+    def __init__(self, document: Document, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.doc = document
+        self.radius = QSpinBox()
+        self.radius.setRange(0, 32)
+        self.radius.setSuffix(" px")
+        self.radius.setSpecialValueText("off")
+        self.radius.setValue(4)
+        self.radius.setToolTip("Filter radius: larger removes more noise and blurs interreflections more (0 = off)")
+        self.apply = QPushButton("Apply")
+        self.apply.setToolTip("Smooth the interreflection components along the photograph's edges; "
+                              "κ = 1 still gives the photograph exactly")
+        self.apply.clicked.connect(lambda: self.apply_requested.emit(self.radius.value()))
+        self.state = QLabel()
+        self.state.setWordWrap(True)
+        self.state.setStyleSheet("color: palette(placeholder-text);")
+        row = QHBoxLayout()
+        row.addWidget(QLabel("Noise reduction"))
+        row.addWidget(self.radius, 1)
+        row.addWidget(self.apply)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addLayout(row)
+        lay.addWidget(self.state)
+        document.events.acquisition.connect(self._update)
+        self._update()
+
+    def _update(self) -> None:
+        acq = self.doc.acquisition
+        for w in (self.radius, self.apply):
+            w.setEnabled(acq is not None)
+        if acq is None:
+            self.state.setText("Acquire a target first: noise reduction filters its decomposition.")
+        elif acq.denoise:
+            self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it).")
+        else:
+            self.state.setText("Off: the decomposition as measured.")

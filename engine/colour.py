@@ -1,0 +1,479 @@
+"""Colours an artist asks for, turned into κ — and the requests physics cannot honour.
+
+A target's *direct colour* is its first interaction component ``R^0 L_d`` (paper Eq. 2)
+averaged over the target: the light it reflects once, before any of its interreflections.
+Recoloring multiplies it by κ exactly (Eq. 3: ``κ R^0 L_d``), so "make the target this
+colour" has one answer per channel, ``κ = wanted / current``; the interreflections then
+follow from the decomposition. The paper picks κ the same way in its Fig. 7 (the ratio of
+the direct components of two papers).
+
+Colours are linear RGB in the photograph's units unless said otherwise. Display colours
+(hex, sRGB, CIE Lab) are decoded with colour-science to linear values that show as that
+colour at display exposure 0 (the ``to_*`` functions take the display's ``exposure``).
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+from engine.checks import check_float_image, check_kappa
+from engine.decompose import Decomposition
+from engine.errors import InputError
+
+__all__ = [
+    "Convergence",
+    "convergence",
+    "direct_colour",
+    "kappa_for_albedo",
+    "kappa_for_colour",
+    "kappa_limit",
+    "luminance_weights",
+    "parse_colour",
+    "to_hex",
+    "to_lab",
+    "to_srgb",
+]
+
+#: Share of the recolored light the last interaction component may carry before a recolor
+#: counts as not converged at its order.
+CONVERGENCE_THRESHOLD = 0.02
+
+
+@cache
+def colour_science():
+    """The ``colour`` package, imported once without its plotting-is-unavailable notice.
+
+    colour-science warns at import time when matplotlib is missing (Albedit never plots
+    with it, and the test suite turns every warning into an error), and switches numpy's
+    global printing to its 1.13 style, which would change how every array prints in the
+    process: the print options are restored.
+    """
+    printing = np.get_printoptions()
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*Matplotlib.*")
+            import colour
+    finally:
+        np.set_printoptions(**printing)
+    return colour
+
+
+@cache
+def _srgb_to_xyz() -> np.ndarray:
+    """colour-science's linear sRGB → CIE XYZ matrix (its inverse goes back, exactly)."""
+    return np.asarray(colour_science().RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ, np.float64)
+
+
+def luminance_weights() -> np.ndarray:
+    """(3,) Rec. 709 / sRGB luminance weights of linear R, G, B (the Y row of that matrix).
+
+    Examples
+    --------
+    >>> np.round(luminance_weights(), 4).tolist()
+    [0.2126, 0.7152, 0.0722]
+    """
+    return _srgb_to_xyz()[1].copy()
+
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_TRIPLE = re.compile(rf"^\s*({_NUMBER})\s*[, ]\s*({_NUMBER})\s*[, ]\s*({_NUMBER})\s*$")
+_HEX = re.compile(r"^#?([0-9a-fA-F]{6}|[0-9a-fA-F]{3})$")
+
+
+def parse_colour(text: str) -> np.ndarray:
+    """Read a colour written by a person and return it as linear RGB.
+
+    Parameters
+    ----------
+    text : str
+        One of ``"#3355cc"`` / ``"#35c"`` (sRGB hex), ``"srgb:0.2,0.33,0.8"`` (sRGB-encoded,
+        0–1), ``"lab:50,10,-40"`` (CIE L*a*b*, the sRGB white), ``"linear:0.2,0.1,0.8"`` or just
+        ``"0.2,0.1,0.8"`` (linear RGB, the engine's own units).
+
+    Returns
+    -------
+    (3,) float64
+        Linear RGB (sRGB primaries and white), non-negative.
+
+    Raises
+    ------
+    InputError
+        Unreadable text, sRGB values outside 0–1, or a Lab colour outside the sRGB gamut;
+        the message shows the accepted forms.
+
+    Examples
+    --------
+    >>> parse_colour("#ffffff").tolist()
+    [1.0, 1.0, 1.0]
+    >>> parse_colour("0.2, 0.1, 0.8").tolist()
+    [0.2, 0.1, 0.8]
+    >>> np.round(parse_colour("lab:100,0,0"), 3).tolist()
+    [1.0, 1.0, 1.0]
+    """
+    if not isinstance(text, str):
+        raise InputError(f"a colour must be text such as '#3355cc', got {type(text).__name__}")
+    forms = "'#3355cc', 'srgb:0.2,0.33,0.8', 'lab:50,10,-40' or linear 'R,G,B'"
+    raw = text.strip()
+    space, _, body = raw.partition(":") if ":" in raw else ("", "", raw)
+    space = space.strip().lower()
+    if not space and _HEX.match(body.strip()):
+        digits = _HEX.match(body.strip()).group(1)
+        if len(digits) == 3:
+            digits = "".join(d * 2 for d in digits)
+        encoded = np.array([int(digits[i:i + 2], 16) for i in (0, 2, 4)], np.float64) / 255.0
+        return _decode_srgb(encoded)
+    match = _TRIPLE.match(body)
+    if match is None or space not in ("", "linear", "srgb", "lab"):
+        raise InputError(f"cannot read the colour {text!r}; write {forms}")
+    values = np.array([float(v) for v in match.groups()], np.float64)
+    if space == "srgb":
+        if np.any(values < 0) or np.any(values > 1):
+            raise InputError(f"sRGB values are 0–1, got {values.tolist()} in {text!r}; "
+                             "for 0–255 write hex, e.g. '#3355cc'")
+        return _decode_srgb(values)
+    if space == "lab":
+        return _lab_to_linear(values, text)
+    if np.any(values < 0):
+        raise InputError(f"linear RGB values must be ≥ 0 (light is never negative), got {values.tolist()} in {text!r}")
+    return values
+
+
+def _decode_srgb(encoded: np.ndarray) -> np.ndarray:
+    colour = colour_science()
+    return np.asarray(colour.cctf_decoding(encoded, function="sRGB"), np.float64)
+
+
+def _lab_to_linear(lab: np.ndarray, text: str) -> np.ndarray:
+    colour = colour_science()
+    if not 0 <= lab[0] <= 100:
+        raise InputError(f"L* must be in 0–100, got {lab[0]} in {text!r}")
+    xyz = np.asarray(colour.Lab_to_XYZ(lab, _white_xy()), np.float64)
+    rgb = np.linalg.solve(_srgb_to_xyz(), xyz)
+    if np.any(rgb < -1e-6):
+        raise InputError(f"the Lab colour {lab.tolist()} lies outside the sRGB gamut "
+                         f"(linear RGB {np.round(rgb, 4).tolist()}); "
+                         "choose a less saturated colour")
+    return np.maximum(rgb, 0.0)
+
+
+def _white_xy() -> np.ndarray:
+    """Chromaticity of linear RGB (1, 1, 1) through the sRGB matrix: Lab's reference white."""
+    return np.asarray(colour_science().XYZ_to_xy(_srgb_to_xyz() @ np.ones(3)), np.float64)
+
+
+def to_srgb(linear, *, exposure: float = 0.0) -> np.ndarray:
+    """sRGB-encoded 0–1 values of a linear colour shown at ``exposure`` stops (clipped for display).
+
+    Examples
+    --------
+    >>> np.round(to_srgb([0.18, 0.18, 0.18]), 3).tolist()
+    [0.461, 0.461, 0.461]
+    """
+    colour = colour_science()
+    lin = np.clip(_colour3("linear", linear) * 2.0 ** float(exposure), 0.0, 1.0)
+    return np.asarray(colour.cctf_encoding(lin, function="sRGB"), np.float64)
+
+
+def to_hex(linear, *, exposure: float = 0.0) -> str:
+    """``"#rrggbb"`` of a linear colour shown at ``exposure`` stops.
+
+    Examples
+    --------
+    >>> to_hex(parse_colour("#3355cc"))
+    '#3355cc'
+    """
+    return "#" + "".join(f"{int(round(v * 255)):02x}" for v in to_srgb(linear, exposure=exposure))
+
+
+def to_lab(linear, *, exposure: float = 0.0) -> np.ndarray:
+    """CIE L*a*b* (relative to the sRGB white, D65) of a linear colour shown at ``exposure`` stops.
+
+    Examples
+    --------
+    >>> np.round(to_lab([1.0, 1.0, 1.0]), 3).tolist()
+    [100.0, 0.0, 0.0]
+    """
+    colour = colour_science()
+    xyz = _srgb_to_xyz() @ (_colour3("linear", linear) * 2.0 ** float(exposure))
+    return np.asarray(colour.XYZ_to_Lab(xyz, _white_xy()), np.float64) + 0.0
+
+
+def direct_colour(decomposition: Decomposition, *, direct=None) -> np.ndarray:
+    """The target's current colour: its direct component ``R^0 L_d`` averaged over the target.
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+        Of the target (its ``components[0]`` on target pixels is ``R^0 L_d``).
+    direct : (H, W, 3) float, optional
+        The target's direct image D (projector light, :class:`engine.acquire.PreparedTarget`).
+        Given, the colour is *white-balanced*: its chromaticity is D's (the projector is the
+        rig's white light) and its luminance the photograph's, so the colour cast of the
+        photograph's own light (a warm lamp, light bounced off a red wall) is removed.
+
+    Returns
+    -------
+    (3,) float64
+        Linear RGB in the photograph's units.
+
+    Raises
+    ------
+    InputError
+        Not a decomposition, a D of the wrong shape, or no light on the target.
+
+    Notes
+    -----
+    ``R^0 L_d = ρ E₀`` (Sec. 3.1): albedo times the light that reaches the target without
+    touching it, which recoloring does not change, so ``κ`` scales this colour exactly.
+    ``D = ρ E_p`` with ``E_p`` the projector's (white) light, hence white balancing by D.
+    The colour is relative: its scale depends on the lighting, not only on the albedo
+    (:mod:`engine.albedo` gives absolute albedo when a reference was measured).
+
+    Examples
+    --------
+    >>> comps = np.zeros((2, 1, 2, 3), np.float32)
+    >>> comps[0, 0, 0] = [0.2, 0.4, 0.1]; comps[1, 0, 0] = 0.05
+    >>> d = Decomposition(comps, np.zeros((1, 2, 3), np.float32), np.array([[True, False]]))
+    >>> np.round(direct_colour(d), 3).tolist()
+    [0.2, 0.4, 0.1]
+    """
+    if not isinstance(decomposition, Decomposition):
+        raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
+    target = decomposition.target
+    if decomposition.shape[2] != 3:
+        raise InputError(f"a colour needs 3 channels, the decomposition has {decomposition.shape[2]}")
+    seen = decomposition.components[0][target].astype(np.float64).mean(axis=0)
+    if float(seen @ luminance_weights()) <= 0:
+        raise InputError("the target reflects no light in the photograph: its colour cannot be measured")
+    if direct is None:
+        return seen
+    d = check_float_image("direct", direct, ndim=3)
+    if d.shape != decomposition.shape:
+        raise InputError(f"direct must have the photograph's shape {decomposition.shape}, got {d.shape}")
+    lit = target & np.all(d > 0, axis=-1)
+    if not lit.any():
+        raise InputError("the direct image D is zero on the whole target: measure it (Nayar patterns) first")
+    balanced = d[lit].astype(np.float64).mean(axis=0)
+    return balanced * float(seen @ luminance_weights()) / float(balanced @ luminance_weights())
+
+
+def kappa_for_colour(current, wanted, *, keep_luminance: bool = False) -> np.ndarray:
+    """κ that turns a target's current colour into the wanted one.
+
+    Parameters
+    ----------
+    current : (3,) float
+        The target's colour now (:func:`direct_colour`), linear, every channel > 0.
+    wanted : (3,) float
+        The colour asked for, linear (:func:`parse_colour`), in the same units, ≥ 0.
+    keep_luminance : bool
+        Change hue and chroma only: κ is scaled so the luminance (Rec. 709 weights) of the
+        new colour equals the current one.
+
+    Returns
+    -------
+    (3,) float64
+        κ per channel.
+
+    Raises
+    ------
+    InputError
+        A channel of ``current`` is 0 (no scale of it makes light), or ``wanted`` is
+        negative, black with ``keep_luminance``, or malformed.
+
+    Notes
+    -----
+    Eq. 3: recoloring scales ``R^0 L_d`` by κ exactly, so ``κ = wanted / current``.
+
+    Examples
+    --------
+    >>> kappa_for_colour([0.1, 0.8, 0.1], [0.2, 0.1, 0.8]).tolist()
+    [2.0, 0.125, 8.0]
+    >>> k = kappa_for_colour([0.5, 0.5, 0.5], [1.0, 0.0, 0.0], keep_luminance=True)
+    >>> round(float(k @ luminance_weights() * 0.5), 6) == round(0.5 * float(luminance_weights().sum()), 6)
+    True
+    """
+    cur = _colour3("current", current)
+    want = _colour3("wanted", wanted)
+    if np.any(cur <= 0):
+        raise InputError(f"the target's current colour {cur.tolist()} has a black channel: no κ can make light there")
+    kappa = want / cur
+    if keep_luminance:
+        new = float((kappa * cur) @ luminance_weights())
+        if new <= 0:
+            raise InputError("a black colour has no hue to keep the luminance with; switch 'keep luminance' off")
+        kappa *= float(cur @ luminance_weights()) / new
+    return kappa
+
+
+def kappa_for_albedo(current_albedo, wanted_albedo) -> np.ndarray:
+    """κ that gives the target an absolute albedo, refusing impossible ones.
+
+    Parameters
+    ----------
+    current_albedo : (3,) float
+        The target's measured absolute albedo (:meth:`engine.albedo.AlbedoScale.albedo`).
+    wanted_albedo : (3,) float
+        The albedo asked for, each channel in [0, 1).
+
+    Returns
+    -------
+    (3,) float64
+
+    Raises
+    ------
+    InputError
+        A wanted albedo ≥ 1 (a surface cannot reflect more light than it receives; the
+        interreflection series would diverge), a negative one, or a current albedo that is
+        0 or ≥ 1 (the measurement is wrong: the reference was lit differently).
+
+    Examples
+    --------
+    >>> kappa_for_albedo([0.1, 0.8, 0.1], [0.2, 0.1, 0.8]).tolist()
+    [2.0, 0.125, 8.0]
+    """
+    cur = _colour3("current_albedo", current_albedo)
+    want = _colour3("wanted_albedo", wanted_albedo)
+    over = [f"{'RGB'[c]} = {want[c]:g}" for c in range(3) if want[c] >= 1]
+    if over:
+        raise InputError(f"an albedo of 1 or more ({', '.join(over)}) is impossible: "
+                         "a surface cannot reflect more light "
+                         "than it receives (the interreflection series would diverge); ask for less than 1")
+    if np.any(cur <= 0) or np.any(cur >= 1):
+        raise InputError(f"the target's measured albedo {np.round(cur, 4).tolist()} is not in (0, 1): the reference "
+                         "(colour checker) was not lit like the target; "
+                         "measure it beside the target, facing the same way")
+    return want / cur
+
+
+def kappa_limit(decomposition: Decomposition) -> np.ndarray:
+    """Largest κ per channel for which the target's interreflection series still converges.
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+        Of order K ≥ 2.
+
+    Returns
+    -------
+    (3,) float64
+        ``Σ R^{K-2} L_d / Σ R^{K-1} L_d`` over the target: the reciprocal of the growth
+        rate of the last interactions, an estimate of 1 / (spectral radius of R). ``inf``
+        where the last component is 0 or K = 1 (nothing measured to bound it).
+
+    Notes
+    -----
+    ``Σ κ^{i+1} R^i L_d`` (Eq. 3) is a power series in κR; it converges while κ times the
+    spectral radius of R is below 1, and the ratio of successive ``R^i L_d`` tends to that
+    radius. With the absolute albedo known, ``1 / albedo`` is a stricter bound.
+    """
+    comps = _inside_sums(decomposition)
+    if comps.shape[0] < 2:
+        return np.full(comps.shape[1], np.inf)
+    last, before = comps[-1], comps[-2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(last > 0, before / np.where(last > 0, last, 1.0), np.inf)
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """How much of a recolor the captured order may be missing.
+
+    Attributes
+    ----------
+    share : (3,) float64
+        Per channel, the last interaction component's share of the target's recolored light
+        ``κ^K Σ R^{K-1} L_d / Σ_i κ^{i+1} Σ R^i L_d``.
+    ratio : (3,) float64
+        κ times the growth rate of the last interactions (``κ / kappa_limit``); ≥ 1 means
+        the series diverges.
+    threshold : float
+    order : int
+    """
+
+    share: np.ndarray
+    ratio: np.ndarray
+    threshold: float
+    order: int
+
+    @property
+    def converged(self) -> bool:
+        """The last component is below the threshold in every channel and the series converges."""
+        return bool(np.all(self.share <= self.threshold) and np.all(self.ratio < 1))
+
+    def message(self) -> str:
+        """One line for a status bar or stderr: empty when converged, else what is wrong and what helps."""
+        if self.converged:
+            return ""
+        c = int(np.argmax(self.ratio)) if np.any(self.ratio >= 1) else int(np.argmax(self.share))
+        channel = "RGB"[c]
+        if self.ratio[c] >= 1:
+            return (f"κ diverges in {channel}: the target would reflect more light than it receives round its "
+                    f"interreflections (κ is {self.ratio[c]:.2f}× the limit); ask for a smaller change")
+        return (f"the recolor has not converged at order {self.order}: the last interaction is "
+                f"{self.share[c]:.1%} of the target's light in {channel} (above {self.threshold:.0%}); "
+                "capture a higher order or ask for a smaller change")
+
+
+def convergence(decomposition: Decomposition, kappa, *, threshold: float = CONVERGENCE_THRESHOLD) -> Convergence:
+    """Measure whether recoloring with ``kappa`` has converged at the decomposition's order.
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+    kappa : float or (3,) float
+    threshold : float
+        Largest acceptable share of the last interaction component (default 2 %).
+
+    Returns
+    -------
+    Convergence
+
+    Notes
+    -----
+    Eq. 3 is truncated after K terms (Sec. 3.1 assumes ``R^i ≈ 0`` beyond). The last term
+    kept bounds what was dropped: for a geometric tail with ratio q the missing light is
+    ``q / (1 − q)`` times the last term, so a large last term means a large error.
+
+    Examples
+    --------
+    >>> comps = np.zeros((2, 1, 2, 3), np.float32)
+    >>> comps[0, 0, 0] = 1.0; comps[1, 0, 0] = 0.1
+    >>> d = Decomposition(comps, np.zeros((1, 2, 3), np.float32), np.array([[True, False]]))
+    >>> c = convergence(d, 1.0)
+    >>> round(float(c.share[0]), 4), c.converged
+    (0.0909, False)
+    >>> convergence(d, 0.1).converged
+    True
+    """
+    if not isinstance(threshold, (int, float)) or not 0 < threshold < 1:
+        raise InputError(f"threshold must be a fraction in (0, 1), got {threshold!r}")
+    sums = _inside_sums(decomposition)
+    k = sums.shape[0]
+    kap = check_kappa(kappa, sums.shape[1])
+    weights = kap[None, :] ** np.arange(1, k + 1)[:, None]
+    total = (weights * sums).sum(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(total > 0, weights[-1] * sums[-1] / np.where(total > 0, total, 1.0), 0.0)
+        ratio = kap / kappa_limit(decomposition)
+    return Convergence(share, np.nan_to_num(ratio, nan=0.0), float(threshold), k)
+
+
+def _inside_sums(decomposition: Decomposition) -> np.ndarray:
+    """(K, C) float64: each inside component summed over the target."""
+    if not isinstance(decomposition, Decomposition):
+        raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
+    return decomposition.components[:, decomposition.target].astype(np.float64).sum(axis=1)
+
+
+def _colour3(name: str, value) -> np.ndarray:
+    arr = np.asarray(value, np.float64)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} must be 3 finite numbers (R, G, B), got {np.asarray(value).tolist()!r:.80}")
+    if np.any(arr < 0):
+        raise InputError(f"{name} must be ≥ 0 in every channel, got {arr.tolist()}")
+    return arr

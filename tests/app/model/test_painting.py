@@ -1,0 +1,197 @@
+"""Painting from plain mouse events, without Qt: expected masks, one drag = one undo step."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.model.document import Document
+from app.model.painting import (
+    EventType,
+    MouseEvent,
+    Painter,
+    Tool,
+    capsule,
+    move,
+    polygon_mask,
+    press,
+    release,
+    similar_region,
+)
+
+H, W = 40, 60
+
+
+def _capsule_reference(p0, p1, r, shape=(H, W)):
+    """Independent per-pixel reference: pixel centres within r of the segment."""
+    out = np.zeros(shape, bool)
+    (ax, ay), (bx, by) = p0, p1
+    for i in range(shape[0]):
+        for j in range(shape[1]):
+            px, py = j + 0.5, i + 0.5
+            d2 = (bx - ax) ** 2 + (by - ay) ** 2
+            t = 0.0 if d2 == 0 else min(max(((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / d2, 0.0), 1.0)
+            out[i, j] = (px - ax - t * (bx - ax)) ** 2 + (py - ay - t * (by - ay)) ** 2 <= r * r
+    for x, y in (p0, p1):
+        if 0 <= x < shape[1] and 0 <= y < shape[0]:
+            out[int(y), int(x)] = True
+    return out
+
+
+@pytest.fixture
+def doc():
+    img = np.full((H, W, 3), 0.2, np.float32)
+    img[10:30, 30:50] = (0.8, 0.1, 0.1)  # a red patch for the fill tool
+    d = Document(img)
+    d.add_target("t")
+    return d
+
+
+def _drag(painter, points, **kw):
+    painter.handle(press(*points[0], **kw))
+    for p in points[1:]:
+        painter.handle(move(*p, **kw))
+    painter.handle(release(*points[-1], **kw))
+
+
+@pytest.mark.parametrize("size", [1, 5, 12])
+def test_brush_drag_paints_the_swept_capsules(doc, size):
+    p = Painter(doc)
+    p.set_size(size)
+    pts = [(5.2, 5.7), (20.4, 8.1), (33.0, 30.5)]
+    _drag(p, pts)
+    expected = np.zeros((H, W), bool)
+    for a, b in zip(pts[:-1], pts[1:]):
+        expected |= _capsule_reference(a, b, size / 2)
+    np.testing.assert_array_equal(doc.target(doc.current).mask, expected)
+
+
+def test_one_drag_is_one_undo_step_storing_its_bounding_box(doc):
+    t = doc.target(doc.current)
+    p = Painter(doc)
+    p.set_size(4)
+    _drag(p, [(5, 5), (8, 6)])
+    first = t.mask.copy()
+    n = doc.history.count()
+    _drag(p, [(10, 20), (15, 22), (25, 25), (12, 35)])
+    assert doc.history.count() == n + 1
+    atom = doc.history._commands[-1]
+    y0, y1, x0, x1 = atom.bbox
+    assert atom.before.shape == (y1 - y0, x1 - x0) and atom.before.size < H * W / 2
+    second = t.mask.copy()
+    doc.history.undo()
+    np.testing.assert_array_equal(t.mask, first)
+    doc.history.redo()
+    np.testing.assert_array_equal(t.mask, second)
+    doc.history.undo()
+    doc.history.undo()
+    assert not t.mask.any()
+
+
+def test_eraser_and_alt_subtract(doc):
+    t = doc.target(doc.current)
+    t.mask[:] = True
+    p = Painter(doc)
+    p.set_size(3)
+    p.set_tool(Tool.ERASER)
+    _drag(p, [(10.5, 10.5), (10.5, 10.5)])
+    assert (~t.mask).sum() == _capsule_reference((10.5, 10.5), (10.5, 10.5), 1.5).sum()
+    p.set_tool(Tool.BRUSH)
+    _drag(p, [(40.5, 20.5), (40.5, 20.5)], subtract=True)
+    assert not t.mask[20, 40]
+
+
+def test_polygon_closes_on_double_click_and_enter(doc):
+    t = doc.target(doc.current)
+    p = Painter(doc)
+    p.set_tool(Tool.POLYGON)
+    for xy in [(2, 2), (12, 2), (12, 10)]:
+        p.handle(press(*xy))
+    assert p.polygon and not t.mask.any()
+    p.handle(MouseEvent(EventType.DOUBLE_CLICK, 2.0, 10.0))
+    assert not p.polygon
+    # pixel centres strictly inside the rectangle (2..12 x 2..10) minus one triangle half
+    assert t.mask[3, 11] and not t.mask[9, 3] and t.mask.sum() > 30
+    n = doc.history.count()
+    for xy in [(30, 30), (40, 30), (40, 38)]:
+        p.handle(press(*xy))
+    p.close_polygon()
+    assert doc.history.count() == n + 1 and t.mask[31, 39]
+
+
+def test_polygon_and_lasso_rasterise_like_fillpoly():
+    bbox, stamp = polygon_mask([(0, 0), (4, 0), (4, 4), (0, 4)], (10, 10))
+    assert bbox == (0, 5, 0, 5)
+    assert stamp.sum() == 16 and stamp[:4, :4].all()
+
+
+def test_lasso_drag_fills_the_traced_outline(doc):
+    t = doc.target(doc.current)
+    p = Painter(doc)
+    p.set_tool(Tool.LASSO)
+    _drag(p, [(20, 20), (30, 20), (30, 30), (20, 30)])
+    np.testing.assert_array_equal(t.mask[20:30, 20:30], True)
+    assert t.mask.sum() == 100
+
+
+def test_fill_by_similar_colour_selects_the_connected_patch(doc):
+    t = doc.target(doc.current)
+    p = Painter(doc)
+    p.set_tool(Tool.FILL)
+    p.handle(press(35, 15))
+    expected = np.zeros((H, W), bool)
+    expected[10:30, 30:50] = True
+    np.testing.assert_array_equal(t.mask, expected)
+    p.handle(press(35, 15, subtract=True))
+    assert not t.mask.any()
+
+
+def test_similar_region_compares_log_colour_with_tolerance():
+    img = np.ones((1, 6, 3), np.float32)
+    img[0] = [[1.0] * 3, [1.05] * 3, [1.2] * 3, [1.0] * 3, [2.0] * 3, [1.0] * 3]
+    assert similar_region(img, 0.5, 0.5, 0.1).tolist() == [[True, True, False, False, False, False]]
+    assert similar_region(img, 0.5, 0.5, 0.25).tolist() == [[True, True, True, True, False, False]]
+
+
+def test_clear_and_invert_are_undoable(doc):
+    t = doc.target(doc.current)
+    t.mask[5:9, 5:9] = True
+    before = t.mask.copy()
+    doc.invert_mask(t.uid)
+    np.testing.assert_array_equal(t.mask, ~before)
+    doc.clear_mask(t.uid)
+    assert not t.mask.any()
+    doc.history.undo()
+    np.testing.assert_array_equal(t.mask, ~before)
+    doc.history.undo()
+    np.testing.assert_array_equal(t.mask, before)
+
+
+def test_brush_size_keys_and_painting_without_target():
+    doc = Document(np.ones((8, 8, 3), np.float32))
+    warnings = []
+    doc.events.warning.connect(warnings.append)
+    p = Painter(doc)
+    p.set_size(10)
+    p.grow()
+    assert p.size == 12.5
+    p.shrink()
+    p.shrink()
+    assert p.size == 8.0
+    p.set_size(0)
+    p.shrink()
+    assert p.size == 1.0
+    assert not p.handle(press(1, 1)) and "add or select a target" in warnings[-1]
+
+
+def test_refused_edit_becomes_a_warning_not_an_exception(acquired_doc):
+    warnings = []
+    acquired_doc.events.warning.connect(warnings.append)
+    acquired_doc.set_current(acquired_doc.by_name("wall").uid)
+    p = Painter(acquired_doc)
+    assert not p.handle(press(40, 20))
+    assert "acquired" in warnings[-1]
+
+
+def test_capsule_outside_the_image():
+    assert capsule((-50, -50), (-40, -40), 2, (10, 10)) == (None, None)
