@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine._checks import check_float_image
+from engine.checks import check_float_image
 from engine.errors import InputError
 
 #: Relative standard deviation of the float32 pipeline's rounding (captures, patterns and
@@ -72,7 +72,7 @@ class CameraNoise:
             raise InputError(f"camera noise floor must be a relative deviation >= 0, got {self.floor!r}")
 
     @classmethod
-    def ideal(cls, exposure: float = 1.0) -> "CameraNoise":
+    def ideal(cls, exposure: float = 1.0) -> CameraNoise:
         """A noise-free camera: float32 rounding only."""
         return cls((0.0,) * 3, (0.0,) * 3, exposure)
 
@@ -113,7 +113,7 @@ class CameraNoise:
         return {"shot": list(self.shot), "read": list(self.read), "exposure": self.exposure, "floor": self.floor}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "CameraNoise":
+    def from_dict(cls, d: dict) -> CameraNoise:
         """Inverse of :meth:`to_dict`; InputError names a missing or bad field."""
         if not isinstance(d, dict):
             raise InputError(f"camera noise must be a dict, got {type(d).__name__}")
@@ -123,7 +123,7 @@ class CameraNoise:
             raise InputError(f"camera noise is incomplete or malformed ({exc}): expected shot, read and exposure") from None
 
     @classmethod
-    def from_metadata(cls, metadata, exposure: float) -> "CameraNoise | None":
+    def from_metadata(cls, metadata, exposure: float) -> CameraNoise | None:
         """The noise a backend reports with its frames: ``metadata["noise"] = {"shot", "read"}``.
 
         Both are variances for that frame's exposure and gain, in its radiance units; None

@@ -50,31 +50,31 @@ class Noise:
         self.terms: dict[str, np.ndarray] = dict(terms or {})
 
     @classmethod
-    def source(cls, name: str, std) -> "Noise":
+    def source(cls, name: str, std) -> Noise:
         """One independent source of standard deviation ``std`` (per pixel and channel)."""
         return cls({name: np.asarray(std, np.float32)})
 
     @classmethod
-    def fresh(cls, std, prefix: str = "merged") -> "Noise":
+    def fresh(cls, std, prefix: str = "merged") -> Noise:
         """A new source, independent of every other (a unique name is made up)."""
         return cls.source(f"{prefix}#{next(_FRESH)}", std)
 
     def __bool__(self) -> bool:
         return bool(self.terms)
 
-    def _combine(self, other: "Noise", sign: float) -> "Noise":
+    def _combine(self, other: Noise, sign: float) -> Noise:
         out = dict(self.terms)
         for k, v in other.terms.items():
             out[k] = out[k] + np.float32(sign) * v if k in out else np.float32(sign) * v
         return Noise(out)
 
-    def __add__(self, other: "Noise") -> "Noise":
+    def __add__(self, other: Noise) -> Noise:
         return self._combine(other, 1.0)
 
-    def __sub__(self, other: "Noise") -> "Noise":
+    def __sub__(self, other: Noise) -> Noise:
         return self._combine(other, -1.0)
 
-    def __mul__(self, factor) -> "Noise":
+    def __mul__(self, factor) -> Noise:
         f = np.asarray(factor, np.float32)
         return Noise({k: v * f for k, v in self.terms.items()})
 
@@ -88,7 +88,7 @@ class Noise:
         return out
 
     @staticmethod
-    def covariance(a: "Noise", b: "Noise") -> np.ndarray | None:
+    def covariance(a: Noise, b: Noise) -> np.ndarray | None:
         """``Σ_s a_s b_s`` over the sources the two share (None if they share none)."""
         out = None
         for k in a.terms.keys() & b.terms.keys():
@@ -96,7 +96,7 @@ class Noise:
             out = term if out is None else out + term
         return out
 
-    def merged(self, keep=(), prefix: str = "merged") -> "Noise":
+    def merged(self, keep=(), prefix: str = "merged") -> Noise:
         """The same variance with every source not in ``keep`` merged into one fresh source.
 
         Sources other images also hold (the photograph, D) must be kept for their
