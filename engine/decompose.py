@@ -14,8 +14,9 @@ import numpy as np
 from engine.checks import check_choice, check_float_image, check_kappa, check_mask, check_order, float_dtype
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER, outside_matrix, transport_matrix
+from engine.noise import packed_index
 from engine.progress import Progress, ShouldStop, checkpoint, report
-from engine.solve import ConeSolver, Constraint, cone_basis, solve_systems
+from engine.solve import ConeSolver, Constraint, cone_basis, solve_systems, solve_weighted
 
 #: Pixels per tile: bounds the solver's working memory (~K·C·4·4 bytes per pixel).
 TILE_PIXELS = 1 << 18
@@ -43,6 +44,12 @@ class Decomposition:
     residual : (H, W) float32
         Relative fit residual ``‖A x − b‖ / ‖b‖`` per pixel over all channels; zero where
         the observations satisfy the constraints exactly.
+    covariance : (K(K+1)/2, H, W, C) float32 or None
+        Packed covariance (:func:`engine.noise.unpack_covariance`) of each pixel-channel's
+        unknowns, in the solver's order: on the target ``R^0 L_d … R^{K-1} L_d``; off it
+        ``L̄_d, C R^0 L_d … C R^{K-2} L_d`` (``C R^0 … C R^{K-1}`` without unreached light).
+        None when the observations' noise was not given. Standard deviations:
+        :meth:`standard_deviation`.
     """
 
     components: np.ndarray
@@ -51,6 +58,7 @@ class Decomposition:
     constraint: str = Constraint.ORDERED.value
     unreached_light: bool = True
     residual: np.ndarray | None = None
+    covariance: np.ndarray | None = None
 
     @property
     def order(self) -> int:
@@ -130,6 +138,7 @@ def decompose(
     *,
     constraint: str = "ordered",
     unreached_light: bool = True,
+    covariance=None,
     progress: Progress | None = None,
     should_stop: ShouldStop | None = None,
 ) -> Decomposition:
@@ -147,6 +156,11 @@ def decompose(
     unreached_light : bool
         False declares projector-only lighting (``L̄_d = 0``), which frees one more outside
         component (K instead of K-1).
+    covariance : (K(K+1)/2, H, W, C) float, optional
+        The observations' noise covariance per pixel and channel, packed
+        (:attr:`engine.acquire.Acquisition.covariance`). Given, each pixel-channel is solved
+        by generalised least squares weighted by its inverse and the result carries the
+        covariance of its components (:attr:`Decomposition.covariance`).
     progress, should_stop
         Progress callback ``(step, total, message)`` and cooperative cancellation; see
         :mod:`engine.progress`. Checked between tiles.
@@ -168,6 +182,13 @@ def decompose(
     Inside the target each pixel-channel solves Eq. 6, ``obs[r] = Σ_n binom(n+r, r) R^n L_d``;
     outside it Eq. 9 with the extra unknown ``L̄_d`` present only in ``obs[0]``. Work is done
     in tiles of rows, so memory beyond the result stays bounded.
+
+    With ``covariance`` the constrained problem is ``min (A x − b)ᵀ Σ⁻¹ (A x − b)``: the
+    system is square, so where no constraint is active the estimate is the unweighted one,
+    and Σ decides which way the ordering constraint moves the others where one is (a large
+    noisy high-order observation no longer drags the well-measured components). The
+    components' covariance is ``P_F (G_Fᵀ Σ⁻¹ G_F)⁻¹ P_Fᵀ`` for the active set F
+    (``bench/solve.py`` measures the weighted solver beside the unweighted one).
 
     Examples
     --------
@@ -198,18 +219,26 @@ def decompose(
         cone_basis(k, constraint, leading_free=unreached_light),
     )
     dtype = obs.dtype
+    cov_in = None
+    if covariance is not None:
+        cov_in = check_float_image("covariance", covariance, ndim=4)
+        if cov_in.shape != (k * (k + 1) // 2, h, w, c):
+            raise InputError(f"covariance must have shape {(k * (k + 1) // 2, h, w, c)} (packed K(K+1)/2 planes "
+                             f"per pixel-channel of the {k} observations), got {cov_in.shape}")
     components = np.zeros((k, h, w, c), dtype)
     unreached = np.zeros((h, w, c), dtype)
     residual = np.zeros((h, w), np.float32)
+    cov_out = None if cov_in is None else np.zeros((k * (k + 1) // 2, h, w, c), np.float32)
     rows = max(1, TILE_PIXELS // w)
     tiles = range(0, h, rows)
     for step, y0 in enumerate(tiles):
         checkpoint(should_stop, "decomposition")
         report(progress, step, len(tiles), "decomposing")
         y1 = min(h, y0 + rows)
-        _decompose_tile(obs, target, components, unreached, residual, (y0, y1), inside_solver, outside_solver, unreached_light)
+        _decompose_tile(obs, target, components, unreached, residual, (y0, y1), inside_solver, outside_solver,
+                        unreached_light, cov_in, cov_out)
     report(progress, len(tiles), len(tiles), "decomposed")
-    return Decomposition(components, unreached, target.copy(), constraint, unreached_light, residual)
+    return Decomposition(components, unreached, target.copy(), constraint, unreached_light, residual, cov_out)
 
 
 def observe(decomposition: Decomposition, *, kappa=None, order: int | None = None) -> np.ndarray:
@@ -264,7 +293,8 @@ def _check_observations(observations) -> np.ndarray:
     return obs.astype(float_dtype(obs), copy=False)
 
 
-def _decompose_tile(obs, target, components, unreached, residual, rows, inside_solver, outside_solver, unreached_light):
+def _decompose_tile(obs, target, components, unreached, residual, rows, inside_solver, outside_solver, unreached_light,
+                    cov_in=None, cov_out=None):
     y0, y1 = rows
     k, _, w, c = obs.shape
     b = obs[:, y0:y1].reshape(k, -1)
@@ -273,15 +303,15 @@ def _decompose_tile(obs, target, components, unreached, residual, rows, inside_s
     # outside unknowns are (L̄_d, C R^0 L_d, ...): L̄_d goes to `unreached` (row index k)
     outside_rows = np.concatenate([[k], np.arange(k - 1)]) if unreached_light else inside_rows
     res_num = np.zeros(b.shape[1], np.float64)
-    solve_systems(
-        b,
-        selector,
-        [inside_solver, outside_solver],
-        [inside_rows, outside_rows],
-        components[:, y0:y1].reshape(k, -1),
-        unreached[y0:y1].reshape(-1),
-        res_num,
-    )
+    if cov_in is None:
+        solve_systems(b, selector, [inside_solver, outside_solver], [inside_rows, outside_rows],
+                      components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1), res_num)
+    else:
+        packed = cov_out[:, y0:y1].reshape(cov_out.shape[0], -1)
+        solve_weighted(b, cov_in[:, y0:y1].reshape(cov_in.shape[0], -1), selector, [inside_solver, outside_solver],
+                       [inside_rows, outside_rows], components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1),
+                       packed, res_num)
+        cov_out[:, y0:y1] = packed.reshape(cov_out[:, y0:y1].shape)
     res_den = np.einsum("ij,ij->j", b, b, dtype=np.float64)
     num = res_num.reshape(-1, c).sum(axis=1)
     den = res_den.reshape(-1, c).sum(axis=1)

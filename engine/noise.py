@@ -24,9 +24,11 @@ import numpy as np
 from engine.checks import check_float_image
 from engine.errors import InputError
 
-#: Relative standard deviation of the float32 pipeline's rounding (captures, patterns and
-#: renderers compute in float32: about one unit in the last place of every stored value).
-FLOAT32_FLOOR = float(np.finfo(np.float32).eps)
+#: Relative standard deviation of the float32 pipeline's rounding: captures, patterns and
+#: renderers compute in float32, and a stored value carries a few units in the last place of
+#: accumulated rounding (measured on the ideal virtual rig: the 6th–8th order components'
+#: errors are 2.9× what one unit, 2^-23, predicts).
+FLOAT32_FLOOR = 3 * float(np.finfo(np.float32).eps)
 
 
 @dataclass(frozen=True)
