@@ -18,7 +18,7 @@ import numpy as np
 from engine.checks import check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
-from engine.figurate import outside_matrix, transport_matrix
+from engine.noise import packed_index
 
 #: Elements per Horner tile: small enough for the accumulator to stay in cache.
 _TILE = 3 * (1 << 15)
@@ -82,40 +82,50 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
     return out.reshape(h, w, c)
 
 
-def recolor_weights(decomposition: Decomposition, kappa) -> np.ndarray:
-    """Weights ``v`` such that the unconstrained recolor is ``Σ_r v_r · observations[r]``.
+def recolor_variance(decomposition: Decomposition, kappa) -> np.ndarray:
+    """Variance of :func:`recolor`'s result, from the decomposition's covariance.
 
     Parameters
     ----------
     decomposition : Decomposition
-        Only its order, target and unreached-light flag are used.
+        Decomposed with ``covariance=`` (the observations' noise).
     kappa : float or (C,) array_like
 
     Returns
     -------
-    (K, H, W, C) float32
-        Inside the target ``v = M⁻ᵀ k`` with ``k_i = κ^{i+1}`` (Eq. 3, 6); outside it the same
-        with Eq. 9's matrix and ``(1, κ, …, κ^{K-1})`` (Eq. 4). How observation noise reaches the
-        recolored image when no constraint is active.
+    (H, W, C) float32
+        ``wᵀ Σ w`` per pixel-channel, ``w_i = κ^{i+1}`` for the target's unknowns
+        (Eq. 3) and ``κ^i`` for ``(L̄_d, C R^0 L_d, …)`` off it (Eq. 4): how the noise of
+        component i is multiplied by ``κ^{i+1}``.
+
+    Raises
+    ------
+    InputError
+        The decomposition carries no covariance.
 
     Examples
     --------
-    >>> d = Decomposition(np.zeros((2, 1, 2, 1), np.float32), np.zeros((1, 2, 1), np.float32), np.array([[True, False]]))
-    >>> recolor_weights(d, 1.0)[:, 0, :, 0].tolist()   # κ = 1 returns the photograph
-    [[1.0, 1.0], [0.0, 0.0]]
+    >>> cov = np.array([1.0, 0.0, 4.0], np.float32).reshape(3, 1, 1, 1)  # Var c0 = 1, Var c1 = 4
+    >>> d = Decomposition(np.zeros((2, 1, 1, 1), np.float32), np.zeros((1, 1, 1), np.float32),
+    ...                   np.ones((1, 1), bool), covariance=cov)
+    >>> float(recolor_variance(d, 2.0)[0, 0, 0])          # 2² · 1 + 4² · 4
+    68.0
     """
     if not isinstance(decomposition, Decomposition):
         raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
+    if decomposition.covariance is None:
+        raise InputError("the decomposition carries no covariance: decompose with covariance= to predict its noise")
     k, h, w, c = decomposition.components.shape
     kap = check_kappa(kappa, c)
-    powers = np.arange(1, k + 1)[:, None]
-    inside = np.linalg.solve(transport_matrix(k).T, kap[None, :] ** powers)  # (K, C)
-    if decomposition.unreached_light:
-        outside = np.linalg.solve(outside_matrix(k).T, kap[None, :] ** (powers - 1))
-    else:
-        outside = inside
-    t = decomposition.target[None, :, :, None]
-    return np.where(t, inside[:, None, None, :], outside[:, None, None, :]).astype(np.float32)
+    powers = np.arange(k, dtype=np.float64)[:, None]
+    inside = kap[None, :] ** (powers + 1)
+    outside = kap[None, :] ** powers if decomposition.unreached_light else inside
+    weights = np.where(decomposition.target[None, :, :, None], inside[:, None, None, :], outside[:, None, None, :])
+    out = np.zeros((h, w, c), np.float64)
+    for i in range(k):
+        for j in range(k):
+            out += weights[i] * weights[j] * decomposition.covariance[packed_index(i, j, k)]
+    return out.astype(np.float32)
 
 
 @dataclass(frozen=True, eq=False)

@@ -45,6 +45,10 @@ WINDOW = 16
 BIAS_WINDOW = 8
 #: A decay ratio is measured from component sums over the target at least this many σ.
 SIGNIFICANT = 3.0
+#: Pixels darker than this fraction of their region's median brightness weigh as if that
+#: bright when a region's relative errors are summed to choose an order (an unlit
+#: background would decide otherwise).
+DARK = 0.1
 #: Largest decay ratio (and κ·ratio) used to extrapolate: the series must converge.
 MAX_RATIO = 0.95
 
@@ -279,7 +283,9 @@ def recolor_trusted(trusted: TrustedDecomposition, kappa) -> TrustedRecolor:
         for ch in range(c):
             photo = trusted.photograph[region, ch].astype(np.float64)
             photo_var = trusted.photograph_variance[region, ch].astype(np.float64)
-            rel = 1.0 / np.maximum(photo**2, 1e-12 * max(float(np.max(photo**2)), 1e-300))
+            # relative errors, so a lamp does not decide; pixels far darker than the region's
+            # mean (an unlit background) would decide instead: their weight is capped
+            rel = 1.0 / np.maximum(photo**2, (DARK * max(float(np.median(np.abs(photo))), 1e-30)) ** 2)
             weights = _weights(kap[ch], inside, trusted.order)
             a = weights[0]
             # the chain of candidates (K, J), bias decreasing: the photograph times a, then (2, 2),
@@ -339,7 +345,7 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
         for ch in range(c):
             checkpoint(should_stop, "noise-aware recoloring")
             light = fit[..., ch]
-            # pixels too dark to carry a share take their neighbours' smoothed shares
+            # pixels with no light carry no share: they take their neighbours' smoothed shares
             lit = region & (light > 1e-6 * max(float(np.max(np.where(region, light, 0))), 1e-300))
             denom = np.where(lit, light, 1.0)
             est, var, neff = [], [], []
@@ -505,7 +511,7 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
     vv = np.where(ok, v, 0.0)
     u = np.where(ok, 1.0 / np.where(ok, v, 1.0), 0.0)
     s0 = np.where(ok, s, 0.0)
-    count = np.maximum(_box(lit, window), 1e-12)
+    weight = np.maximum(_box(u, window), 1e-300)  # precision in the window: noisy pixels count less
     best_score = best_est = best_mse = best_var = None
     for r in radii:
         if r == 0:
@@ -518,7 +524,7 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
             var = np.where(seen, 1.0 / total, np.inf)
             self_weight = u / total
         sure = np.where(ok, (est - s0) ** 2 - vv * (1 - 2 * self_weight), 0.0)
-        score = _box(sure, window) / count
+        score = _box(u * sure, window) / weight
         mse = np.maximum(score, var)
         if best_score is None:
             best_score, best_est, best_var, best_mse = score, est, var, mse
@@ -528,6 +534,10 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
             best_est = np.where(better, est, best_est)
             best_var = np.where(better, var, best_var)
             best_mse = np.where(better, mse, best_mse)
+    # pixels without a share of their own take the widest window's estimate of their neighbours
+    best_est = np.where(ok, best_est, est)
+    best_var = np.where(ok, best_var, var)
+    best_mse = np.where(ok, best_mse, np.maximum(score, var))
     finite = np.isfinite(best_var)
     neff = np.where(ok & finite, 1.0 / np.maximum(u * np.where(finite, best_var, 1.0), 1e-300), 1.0)
     return best_est, np.where(np.isfinite(best_mse), best_mse, 0.0), np.maximum(neff, 1.0)

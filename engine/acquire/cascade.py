@@ -30,7 +30,8 @@ from engine.calibrate import Calibration
 from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
-from engine.recolor import recolor, recolor_weights
+from engine.recolor import recolor
+from engine.trust import recolor_trusted
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,6 +117,7 @@ class _Plan:
         # (level, emission target) -> light emitted on the target -> the scene's response with
         # targets < level recolored: level 0 raw captures, level >= 1 recolored observations
         self.predictors = {}
+        self.noise_levels: dict = {}  # (level, target) -> relative noise of its last response
         self.log: list[dict] = []
         self.clamped = 0
         self.track_predictions = False  # validate predictions even when never using them (auto order)
@@ -128,17 +130,27 @@ class _Plan:
         unless the prediction policy accepts a linear prediction from earlier emissions on the
         same target at the same level (Sec. 5's recolored prediction), which skips them all.
         """
-        predictor = self.predictors.setdefault((level, target), Predictor(self.prepared[target].mask))
+        key = (level, target)
+        predictor = self.predictors.setdefault(key, Predictor(self.prepared[target].mask))
         policy = Policy(self.adaptive.policy)
         guess = predictor.predict(wanted.image) if policy is not Policy.BRUTE or self.track_predictions else None
-        use_guess = guess is not None and (
-            (policy is Policy.SPAN and guess.bound < self.adaptive.threshold) or (policy is Policy.LINEAR and seq.trusted)
-        )
+        band = self._band(key)
+        use_guess, reason = False, ""
+        if guess is not None and policy is Policy.SPAN:
+            use_guess = guess.bound < band
+            reason = (f"error bound {guess.bound:.2%} " + ("within" if use_guess else "above")
+                      + (f" the capture's noise {band:.2%}" if band > self.adaptive.threshold
+                         else f" the threshold {self.adaptive.threshold:.2%}"))
+        elif guess is not None and policy is Policy.LINEAR and seq.trusted:
+            use_guess, reason = True, "the sequence's prediction was validated"
         saves = self.order**level  # images a prediction at this level replaces
         if use_guess:
             self.log.append({"path": path, "target": target, "level": level, "source": "predicted",
-                             "captures": [], "bound": guess.bound, "images": saves})
-            return _Measured(guess.image, guess.noise)
+                             "captures": [], "bound": guess.bound, "images": saves, "reason": reason})
+            noise = guess.noise
+            if noise is not None:  # what the light's fit leaves out, at the image's scale (Eq. 10)
+                noise = noise + Noise.fresh(np.abs(guess.image) * guess.light_error.astype(np.float32), "prediction")
+            return _Measured(guess.image, noise)
         if level == 0:
             emitted = None
             if wanted.noise is not None and self.base.noise is not None:
@@ -151,13 +163,38 @@ class _Plan:
         else:
             result = self._recolor_lower(level, (target, wanted, seq), path)
             entry = {"path": path, "target": target, "level": level, "source": "computed", "captures": []}
+        noise_level = _relative_noise(result)
+        if noise_level is not None:
+            self.noise_levels[key] = noise_level
         if guess is not None:
-            entry["prediction_error"] = relative_error(guess.image, result.image)
-            if policy is Policy.LINEAR and entry["prediction_error"] < self.adaptive.threshold:
-                seq.trusted = True
+            error = relative_error(guess.image, result.image)
+            entry["prediction_error"] = error
+            if policy is Policy.LINEAR:
+                own = _prediction_error(guess, result, error)  # the prediction's error, noise removed
+                band = self._band(key)
+                if own < band:
+                    seq.trusted = True
+                entry["prediction_error_without_noise"] = own
+                reason = f"prediction off by {own:.2%} beyond the noise, " + ("within" if own < band else "above")
+                reason += f" the capture's noise {band:.2%}" if band > self.adaptive.threshold else \
+                    f" the threshold {self.adaptive.threshold:.2%}"
+        if not reason:
+            reason = ("brute force" if policy is Policy.BRUTE else "no earlier light to predict from" if guess is None
+                      else "the sequence's prediction is not validated yet")
+        entry["reason"] = reason
         self.log.append(entry)
         predictor.add(wanted.image, result.image, result.noise)
         return result
+
+    def _band(self, key) -> float:
+        """What a prediction must beat: the threshold, or the noise of the last response at ``key``.
+
+        A prediction whose error is within the noise its capture would carry is as good as
+        the capture (Sec. 5's threshold, made noise-aware).
+        """
+        if not self.adaptive.noise_band:
+            return self.adaptive.threshold
+        return max(self.adaptive.threshold, self.noise_levels.get(key, 0.0))
 
     def observations(self, level: int, target: int, lighting, path: str, *, auto: bool = False) -> list[_Measured]:
         """The K observations of ``target`` under ``lighting``, targets < level recolored.
@@ -190,17 +227,26 @@ class _Plan:
         return self._recolor_lower(level, None, path)
 
     def _recolor_lower(self, level: int, lighting, path: str) -> _Measured:
-        """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ."""
+        """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ.
+
+        With the noise known this is the noise-aware recolor (:mod:`engine.trust`): the
+        photograph's noise is carried exactly (scaled as the recolor scales it), the rest of
+        its predicted error as a new independent source.
+        """
         t = level - 1
         obs = self.observations(t, t, lighting, path)
-        d = self.prepared[t].decompose(np.stack([o.image for o in obs]).astype(np.float32))
-        image = recolor(d, self.kappas[t])
-        if any(o.noise is None for o in obs):
+        stack = np.stack([o.image for o in obs]).astype(np.float32)
+        if any(o.noise is None for o in obs) or len(obs) < 2:
+            image = recolor(self.prepared[t].decompose(stack), self.kappas[t])
             return _Measured(image, None)
-        noise = Noise()
-        for weight, o in zip(recolor_weights(d, self.kappas[t]), obs):
-            noise = noise + o.noise * weight
-        return _Measured(image, noise.merged(self.shared))
+        covariance = covariance_stack([o.noise for o in obs], stack.shape[1:])
+        result = recolor_trusted(self.prepared[t].trust(stack, covariance), self.kappas[t])
+        photo = stack[0]
+        scale = np.divide(result.image, photo, out=np.zeros_like(photo), where=np.abs(photo) > 0)
+        carried = obs[0].noise * scale
+        rest = np.maximum(np.square(result.sigma) - np.square(scale) * obs[0].noise.variance(), 0)
+        noise = carried + Noise.fresh(np.sqrt(rest), "recolored")
+        return _Measured(result.image, noise.merged(self.shared))
 
 
 def acquire_cascade(
@@ -319,6 +365,31 @@ def acquire_cascade(
         captures=1 + sum(len(e["captures"]) for e in captured),
         log=acq_log,
     )
+
+
+def _relative_noise(measured: _Measured) -> float | None:
+    """``√Σ Var / ‖image‖``: the relative noise of an image (None when unknown)."""
+    if measured.noise is None:
+        return None
+    var = measured.noise.variance()
+    norm = float(np.linalg.norm(measured.image))
+    return float(np.sqrt(np.sum(var, dtype=np.float64)) / norm) if var is not None and norm > 0 else 0.0
+
+
+def _prediction_error(guess, result: _Measured, error: float) -> float:
+    """The prediction's own relative error: the measured one with the two images' noise removed.
+
+    ``‖p − c‖² ≈ e² + Σ Var(p − c)`` for a prediction p of a capture c; without the noises
+    known, the measured error itself.
+    """
+    if guess.noise is None or result.noise is None:
+        return error
+    diff = result.noise - guess.noise
+    var = diff.variance()
+    norm = float(np.linalg.norm(result.image))
+    if var is None or norm == 0:
+        return error
+    return float(np.sqrt(max(error**2 - float(np.sum(var, dtype=np.float64)) / norm**2, 0.0)))
 
 
 def _measure(recorder: Recorder, name: str, pattern: np.ndarray, meta: dict) -> _Measured:

@@ -48,13 +48,18 @@ class Adaptive:
     policy : {"brute", "linear", "span"}
     threshold : float
         Relative error accepted for a predicted observation (paper: 1 %).
+    noise_band : bool
+        Also accept a prediction whose error is within the noise its capture would carry
+        (the relative noise of the last response on that target): such a prediction is as
+        good as the capture. Needs the camera's noise (else the threshold alone decides).
     """
 
     policy: str = Policy.SPAN
     threshold: float = 0.01
+    noise_band: bool = True
 
     def to_dict(self) -> dict:
-        return {"policy": str(self.policy), "threshold": self.threshold}
+        return {"policy": str(self.policy), "threshold": self.threshold, "noise_band": self.noise_band}
 
 
 @dataclass(frozen=True)

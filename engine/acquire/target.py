@@ -30,6 +30,7 @@ from engine.checks import check_mask
 from engine.decompose import Decomposition, decompose
 from engine.errors import InputError
 from engine.fill import fill_unreachable
+from engine.trust import TrustedDecomposition, decompose_orders, prepare_trust
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,16 +66,31 @@ class PreparedTarget:
     direct_matrix: np.ndarray | None = None
     direct_variance: np.ndarray | None = None
 
-    def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3) -> Decomposition:
+    def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3, covariance=None,
+                  constraint: str = "ordered") -> Decomposition:
         """Decompose on the emittable pixels, then estimate the unreachable ones near them.
 
-        :func:`engine.decompose.decompose` on :attr:`mask`, then
-        :func:`engine.fill.fill_unreachable` with the painted target (``mask | unreachable``):
-        unreachable pixels within ``fill_radius`` pixels of emittable ones get their
-        neighbours' interaction shares (0 leaves every one of them out).
+        :func:`engine.decompose.decompose` on :attr:`mask` (weighted by ``covariance`` when
+        given), then :func:`engine.fill.fill_unreachable` with the painted target
+        (``mask | unreachable``): unreachable pixels within ``fill_radius`` pixels of
+        emittable ones get their neighbours' interaction shares (0 leaves every one of them out).
         """
-        d = decompose(observations, self.mask, unreached_light=unreached_light)
+        d = decompose(observations, self.mask, unreached_light=unreached_light, covariance=covariance,
+                      constraint=constraint)
         return fill_unreachable(d, self.mask | self.unreachable, np.asarray(observations)[0], radius=fill_radius)[0]
+
+    def trust(self, observations, covariance, *, unreached_light: bool = True, fill_radius: int = 3,
+              should_stop=None) -> TrustedDecomposition:
+        """The observations ready for noise-aware recoloring (:mod:`engine.trust`).
+
+        Unconstrained weighted decompositions of every order up to the observations' (the
+        first k observations are an order-k acquisition), unreachable pixels filled as in
+        :meth:`decompose`, shares smoothed by :func:`engine.trust.prepare_trust`.
+        """
+        obs = np.asarray(observations)
+        orders = [fill_unreachable(d, self.mask | self.unreachable, obs[0], radius=fill_radius)[0]
+                  for d in decompose_orders(obs, self.mask, covariance, unreached_light=unreached_light)]
+        return prepare_trust(orders, obs[0], should_stop=should_stop)
 
     def report(self) -> str:
         """One line for logs and dialogs."""
