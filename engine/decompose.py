@@ -93,8 +93,39 @@ class Decomposition:
         """
         rows, cols = slice(y0, y1), slice(x0, x1)
         residual = None if self.residual is None else self.residual[rows, cols]
+        cov = None if self.covariance is None else self.covariance[:, rows, cols]
         return Decomposition(self.components[:, rows, cols], self.unreached[rows, cols], self.target[rows, cols],
-                             self.constraint, self.unreached_light, residual)
+                             self.constraint, self.unreached_light, residual, cov)
+
+    def standard_deviation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Standard deviation of every component and of the unreached light.
+
+        Returns
+        -------
+        components : (K, H, W, C) float32
+            Laid out like :attr:`components` (inside ``R^i L_d``, outside ``C R^i L_d``).
+        unreached : (H, W, C) float32
+            Of ``L̄_d`` (zero on the target and without unreached light).
+
+        Raises
+        ------
+        InputError
+            The decomposition carries no covariance (decomposed without the noise).
+        """
+        if self.covariance is None:
+            raise InputError("this decomposition carries no covariance: decompose with covariance= "
+                             "(the acquisition's Acquisition.covariance) to get standard deviations")
+        k = self.order
+        var = np.stack([self.covariance[packed_index(i, i, k)] for i in range(k)])
+        inside = self.target[None, :, :, None]
+        comps = np.where(inside, var, 0)
+        unreached = np.zeros(self.shape, np.float32)
+        if self.unreached_light:
+            comps[: k - 1] += np.where(inside[0], 0, var[1:])
+            unreached = np.where(inside[0], 0, var[0])
+        else:
+            comps += np.where(inside, 0, var)
+        return np.sqrt(comps).astype(np.float32), np.sqrt(unreached).astype(np.float32)
 
     @classmethod
     def from_components(cls, inside, outside, unreached, target, *, constraint: str = "none") -> Decomposition:

@@ -189,6 +189,8 @@ def fit_camera_noise(stacks, exposure: float, *, saturated=None, bins: int = 32)
     for c in range(3):
         m, v = mean[..., c].ravel(), var[..., c].ravel()
         edges = np.unique(np.quantile(m, np.linspace(0, 1, bins + 1)))
+        if edges.size < 3:
+            raise InputError("the repeated frames show no spread of brightness: give a dark and a bright lighting")
         idx = np.clip(np.searchsorted(edges, m, side="right") - 1, 0, len(edges) - 2)
         count = np.bincount(idx, minlength=len(edges) - 1).astype(np.float64)
         ok = count > 0
