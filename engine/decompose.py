@@ -339,9 +339,12 @@ def _decompose_tile(obs, target, components, unreached, residual, rows, inside_s
                       components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1), res_num)
     else:
         packed = cov_out[:, y0:y1].reshape(cov_out.shape[0], -1)
+        out, extra = components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1)
+        warm = inside_solver.basis is not None
+        if warm:  # the unweighted optimum: a start that usually already has the weighted active set
+            solve_systems(b, selector, [inside_solver, outside_solver], [inside_rows, outside_rows], out, extra, res_num)
         solve_weighted(b, cov_in[:, y0:y1].reshape(cov_in.shape[0], -1), selector, [inside_solver, outside_solver],
-                       [inside_rows, outside_rows], components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1),
-                       packed, res_num)
+                       [inside_rows, outside_rows], out, extra, packed, res_num, warm=warm)
         cov_out[:, y0:y1] = packed.reshape(cov_out[:, y0:y1].shape)
     res_den = np.einsum("ij,ij->j", b, b, dtype=np.float64)
     num = res_num.reshape(-1, c).sum(axis=1)

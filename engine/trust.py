@@ -49,6 +49,8 @@ SIGNIFICANT = 3.0
 #: bright when a region's relative errors are summed to choose an order (an unlit
 #: background would decide otherwise).
 DARK = 0.1
+#: A share's variance beyond this (σ a thousand times the pixel's own light) means "unknown".
+UNKNOWN = 1e6
 #: Largest decay ratio (and κ·ratio) used to extrapolate: the series must converge.
 MAX_RATIO = 0.95
 
@@ -351,20 +353,22 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
             est, var, neff = [], [], []
             for j in range(1, k):
                 s = np.where(lit, unknowns[j, ..., ch] / denom, 0.0)
-                v = np.where(lit, cov[j, j, ..., ch] / denom**2, np.inf)
+                v = np.where(lit, np.minimum(cov[j, j, ..., ch] / denom**2, UNKNOWN), np.inf)
                 e_, v_, n_ = _smooth(s, v, lit, radii, window)
                 est.append(np.maximum(e_, 0.0))  # a share is never negative
-                var.append(v_)
+                var.append(np.minimum(v_, UNKNOWN))
                 neff.append(n_)
             for i in range(n):
                 shares[i, ..., ch] = np.where(region, est[i], shares[i, ..., ch])
-                photo_share[i, ..., ch] = np.where(lit, photo_cov[i, ..., ch] / denom / neff[i], photo_share[i, ..., ch])
+                bound = np.sqrt(np.maximum(cov.sum(axis=(0, 1))[..., ch], 0) * var[i])  # Cauchy–Schwarz
+                photo_share[i, ..., ch] = np.where(lit, np.clip(photo_cov[i, ..., ch] / denom / neff[i], -bound, bound),
+                                                   photo_share[i, ..., ch])
                 for j in range(i, n):
                     if i == j:
                         cij = var[i]
                     else:
-                        raw = cov[i + 1, j + 1, ..., ch] / np.sqrt(np.maximum(cov[i + 1, i + 1, ..., ch]
-                                                                              * cov[j + 1, j + 1, ..., ch], 1e-300))
+                        raw = np.clip(cov[i + 1, j + 1, ..., ch] / np.sqrt(np.maximum(
+                            cov[i + 1, i + 1, ..., ch] * cov[j + 1, j + 1, ..., ch], 1e-300)), -1.0, 1.0)
                         cij = raw * np.sqrt(var[i] * var[j] * np.minimum(neff[i], neff[j]) / np.maximum(neff[i], neff[j]))
                     p = packed_index(i, j, n)
                     share_cov[p, ..., ch] = np.where(region, cij, share_cov[p, ..., ch])
@@ -391,7 +395,7 @@ def _target_sums(unknowns: np.ndarray, cov: np.ndarray, target: np.ndarray) -> n
     out = np.zeros((2, k, c))
     if target.any():
         out[0] = unknowns[:, target].sum(axis=1)
-        out[1] = np.sqrt(np.stack([cov[j, j][target].sum(axis=0) for j in range(k)]))
+        out[1] = np.sqrt(np.maximum(np.stack([cov[j, j][target].sum(axis=0) for j in range(k)]), 0))
     return out
 
 

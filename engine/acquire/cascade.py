@@ -241,11 +241,12 @@ class _Plan:
             return _Measured(image, None)
         covariance = covariance_stack([o.noise for o in obs], stack.shape[1:])
         result = recolor_trusted(self.prepared[t].trust(stack, covariance), self.kappas[t])
-        photo = stack[0]
-        scale = np.divide(result.image, photo, out=np.zeros_like(photo), where=np.abs(photo) > 0)
-        carried = obs[0].noise * scale
-        rest = np.maximum(np.square(result.sigma) - np.square(scale) * obs[0].noise.variance(), 0)
-        noise = carried + Noise.fresh(np.sqrt(rest), "recolored")
+        photo = stack[0].astype(np.float64)
+        lit = np.abs(photo) > 1e-6 * max(float(np.abs(photo).max()), 1e-30)
+        scale = np.divide(result.image, photo, out=np.zeros_like(photo), where=lit)
+        carried = obs[0].noise * scale.astype(np.float32)
+        rest = np.maximum(np.square(result.sigma.astype(np.float64)) - np.square(scale) * obs[0].noise.variance(), 0)
+        noise = carried + Noise.fresh(np.sqrt(rest).astype(np.float32), "recolored")
         return _Measured(result.image, noise.merged(self.shared))
 
 
