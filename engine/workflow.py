@@ -124,7 +124,9 @@ def run_capture(
     ``frames`` captures are averaged per pattern (noise ∝ 1/sqrt(frames)).
     The plan (targets in order, order, fixed κ, settings) is written to the session's state
     before the first capture, masks to ``masks/``; re-running with the same session resumes.
-    The last target's decomposition is cached under ``cache/``.
+    The last target's decomposition is cached under ``cache/``, weighted by the
+    observations' noise and with its covariance when the camera's noise is known
+    (:func:`engine.recolor.recolor_variance` then predicts a recolor's σ).
 
     Returns
     -------
@@ -157,7 +159,7 @@ def run_capture(
     )
     last = result.targets[-1][1]
     session.write_mask(f"{targets[-1][0]}-emittable", last.mask)
-    d = last.decompose(result.acquisition.observations)
+    d = last.decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
     cache_decomposition(session, d)
     session.update(
         status="captured",
@@ -191,6 +193,7 @@ def cache_decomposition(session: Session, d: Decomposition) -> None:
             "residual": d.residual,
             "flags": np.array([d.unreached_light], bool),
             "constraint": np.frombuffer(d.constraint.encode().ljust(16), np.uint8),
+            **({} if d.covariance is None else {"covariance": d.covariance}),
         },
     )
 
@@ -219,6 +222,7 @@ def load_decomposition(session: Session, *, rig=None) -> Decomposition:
             bytes(cached["constraint"]).decode().strip(),
             bool(cached["flags"][0]),
             cached["residual"],
+            cached.get("covariance"),
         )
     plan = session.state.get("plan")
     if plan is None:
@@ -233,7 +237,7 @@ def load_decomposition(session: Session, *, rig=None) -> Decomposition:
         Recorder(rig, session), load_calibration(session), targets, plan["order"],
         fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive,
     )
-    d = result.targets[-1][1].decompose(result.acquisition.observations)
+    d = result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
     cache_decomposition(session, d)
     return d
 

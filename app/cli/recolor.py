@@ -5,11 +5,13 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from app.cli._args import kappa
 from engine.denoise import denoise_components
 from engine.errors import InputError, SessionError
 from engine.imageio import to_display, write_image
-from engine.recolor import recolor
+from engine.recolor import recolor, recolor_variance
 from engine.session import Session
 from engine.workflow import load_decomposition
 
@@ -74,4 +76,9 @@ def run(args) -> int:
     write_edit(args.output, out, plan=plan, kappa_value=args.kappa, half=args.half)
     session.update(edit={"kappa": args.kappa.tolist()})
     print(f"wrote {args.output}", file=sys.stderr)
+    if d.covariance is not None and args.denoise <= 0:  # the camera noise κ^(i+1) amplifies, on the target
+        sigma = float(np.sqrt(recolor_variance(d, args.kappa))[d.target].mean())
+        value = float(np.abs(out[d.target]).mean())
+        print(f"predicted σ on the target: {sigma:.4g} (mean), {sigma / max(value, 1e-30):.1%} of its mean value",
+              file=sys.stderr)
     return 0
