@@ -515,20 +515,22 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
     vv = np.where(ok, v, 0.0)
     u = np.where(ok, 1.0 / np.where(ok, v, 1.0), 0.0)
     s0 = np.where(ok, s, 0.0)
-    weight = np.maximum(_box(u, window), 1e-300)  # precision in the window: noisy pixels count less
+    weight = _box(u, window)  # precision in the window: noisy pixels count less
+    weighed = weight > 1e-9 * max(float(weight.max()), 1e-300)  # (box sums leave rounding residue where empty)
+    weight = np.where(weighed, weight, 1.0)
     best_score = best_est = best_mse = best_var = None
     for r in radii:
         if r == 0:
             est, var, self_weight = s0, np.where(ok, v, np.inf), ok.astype(np.float64)
         else:
             total = _box(u, r)
-            seen = total > 0
+            seen = total > 1e-9 * max(float(total.max()), 1e-300)
             total = np.where(seen, total, 1.0)
             est = np.where(seen, _box(u * s0, r) / total, 0.0)
             var = np.where(seen, 1.0 / total, np.inf)
             self_weight = u / total
         sure = np.where(ok, (est - s0) ** 2 - vv * (1 - 2 * self_weight), 0.0)
-        score = _box(u * sure, window) / weight
+        score = np.where(weighed, _box(u * sure, window) / weight, 0.0)
         mse = np.maximum(score, var)
         if best_score is None:
             best_score, best_est, best_var, best_mse = score, est, var, mse

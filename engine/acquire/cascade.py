@@ -168,13 +168,13 @@ class _Plan:
             self.noise_levels[key] = noise_level
         if guess is not None:
             error = relative_error(guess.image, result.image)
+            own = _prediction_error(guess, result, error)  # the prediction's error, noise removed
+            band = self._band(key)
             entry["prediction_error"] = error
+            entry["prediction_error_without_noise"] = own
+            entry["predictable"] = own < band
             if policy is Policy.LINEAR:
-                own = _prediction_error(guess, result, error)  # the prediction's error, noise removed
-                band = self._band(key)
-                if own < band:
-                    seq.trusted = True
-                entry["prediction_error_without_noise"] = own
+                seq.trusted = seq.trusted or own < band
                 reason = f"prediction off by {own:.2%} beyond the noise, " + ("within" if own < band else "above")
                 reason += f" the capture's noise {band:.2%}" if band > self.adaptive.threshold else \
                     f" the threshold {self.adaptive.threshold:.2%}"
@@ -200,8 +200,10 @@ class _Plan:
         """The K observations of ``target`` under ``lighting``, targets < level recolored.
 
         With ``auto`` (one target, Sec. 5's last paragraph) captures continue until the linear
-        prediction of the newest capture from the earlier ones is within the threshold, up to
-        MAX_ORDER observations; ``self.order`` is then the order reached.
+        prediction of the newest capture from the earlier ones is within the threshold or the
+        capture's own noise (its error with the two images' noise removed), up to MAX_ORDER
+        observations; ``self.order`` is then the order reached. The order the recolor uses is
+        then chosen per region and channel by :mod:`engine.trust`.
         """
         seq = _Sequence()
         obs = [self.recolored(level, lighting, f"{path}.0" if path else "photograph")]
@@ -211,7 +213,7 @@ class _Plan:
             sub = f"{path}.{s}" if path else f"r{s}"
             light = self.recolored(level, (target, wanted, seq), sub)
             obs.append(light + obs[s - 1] if diff else light)
-            if auto and self.log[-1].get("prediction_error", np.inf) < self.adaptive.threshold:
+            if auto and self.log[-1].get("predictable", False):
                 break
         if auto:
             self.order = len(obs)
