@@ -10,10 +10,9 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test,gphoto2,harvesters]"
-	# colour-checker-detection pulls opencv-python, which overwrites the contrib build's cv2
-	$(PY) -m pip uninstall --quiet --yes opencv-python
-	$(PY) -m pip install --quiet --force-reinstall --no-deps "opencv-contrib-python-headless>=4.8"
+	$(PY) -m pip install --quiet -e ".[test,gphoto2,harvesters,mitsuba]"
+	# without its dependencies: it pins opencv-python, whose cv2 would replace the contrib build's
+	$(PY) -m pip install --quiet --no-deps "colour-checker-detection>=0.2.3"
 	touch $(STAMP)
 
 run: $(STAMP)

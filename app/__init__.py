@@ -9,3 +9,13 @@
 opens the desktop app. Import-linter contracts in ``pyproject.toml`` keep Qt out of
 ``app.model`` and ``app.cli``.
 """
+
+from importlib.metadata import PackageNotFoundError, version
+
+#: The application's name (window titles, QSettings).
+APP_NAME = "Albedit"
+
+try:
+    __version__ = version("albedit")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "unknown"

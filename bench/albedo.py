@@ -6,9 +6,10 @@ balanced by the direct image D — each compared with the albedo's chromaticity;
 "make it (0.2, 0.1, 0.8)" with the albedo measured against a card laid over the wall
 (expected: the paper's κ = (2, 0.125, 8)).
 
-Checker scene: the absolute albedo of the panel beside the chart (the fit's use case), of
-the chart's own patches, and of the side wall (grazed by the projector: not lit like the
-chart). Prints per-channel relative errors in %.
+Checker scene, with the co-axial projector and with one beside the camera: the absolute
+albedo of the panel beside the chart (in its plane: the fit's use case), of the chart's own
+patches, and of the side wall (not in the chart's plane: the projector lights it
+differently). Prints per-channel relative errors in %.
 
     python bench/albedo.py [--resolution 96] [--frames 16]
 """
@@ -24,7 +25,7 @@ import numpy as np
 
 import devices
 from devices.virtual.scene import SCENE_DIR
-from engine.acquire import Recorder, measure_checker, prepare_target
+from engine.acquire import Recorder, measure_checker, prepare_target, projector_xy
 from engine.albedo import reference_scale
 from engine.checker import detect_checker, reference_reflectances
 from engine.colour import direct_colour, kappa_for_albedo
@@ -92,12 +93,11 @@ def checker(work: Path, options: dict, frames: int) -> None:
         chart = measure_checker(recorder, calibration, detect_checker(photo), photo)
         print(f"  {chart.report()}")
         truth = rig.truth.albedo()
-        patches = chart.patch_direct / chart.scale.scale / reference_reflectances() - 1
-        print(f"  chart patches read back, worst          {_fmt(100 * np.abs(patches).max(axis=0))}")
+        print(f"  chart patches read back, worst          {_fmt(100 * np.abs(chart.scale.residual).max(axis=0))}")
         for name in ("panel", "right_wall"):
             mask = rig.targets[name]
             p = prepare_target(recorder, calibration, mask, photo, name=name)
-            albedo, true = chart.scale.albedo(p.direct, p.mask), truth[mask].mean(axis=0)
+            albedo, true = chart.scale.albedo(p.direct, p.mask, projector_xy(p)), truth[mask].mean(axis=0)
             print(f"  {name:10s} absolute albedo {np.round(albedo, 4).tolist()} "
                   f"vs {np.round(true.astype(float), 4).tolist()}: "
                   f"{_fmt(100 * (albedo / true - 1))}")
@@ -120,6 +120,9 @@ def main(argv=None) -> int:
             cornell(work, options, frames)
             print(f"virtual:checker, {label}, {args.resolution}²")
             checker(work, options, frames)
+            print(f"virtual:checker, {label}, {args.resolution}², projector 25 cm beside the camera")
+            (work / "offset").mkdir()
+            checker(work / "offset", {**options, "projector": "offset"}, frames)
     return 0
 
 

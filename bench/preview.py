@@ -8,7 +8,7 @@ for its frame to be painted before the next one is sent, so every sample is one 
 event-to-pixels latency. Budget: p95 ≤ 16 ms.
 
 Zoomed in past the preview's resolution, the app also renders the visible region at full
-resolution once the picture is still (:meth:`app.model.render.Renderer.render_detail`); its cost is
+resolution once the picture is still (:func:`app.model.views.render_detail`); its cost is
 measured at 100 % and 50 % zoom beside the full-resolution recolor it avoids.
 
     .venv/bin/python bench/preview.py [--height 2160 --width 3840 --order 4 --events 60]
@@ -30,10 +30,12 @@ import numpy as np  # noqa: E402
 from PySide6.QtCore import QEventLoop  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
+from app.model import views  # noqa: E402
 from app.model.display import rgb_to_rgb32  # noqa: E402
 from app.model.document import Document  # noqa: E402
 from app.model.painting import Painter  # noqa: E402
-from app.model.render import Frame, Renderer, Request, View  # noqa: E402
+from app.model.render import PreviewFrame, Request, ViewRenderer  # noqa: E402
+from app.model.views import CanvasView  # noqa: E402
 from app.qt.canvas import Canvas  # noqa: E402
 from app.qt.panels import AlbedoPanel  # noqa: E402
 from app.qt.preview import PreviewController  # noqa: E402
@@ -122,7 +124,7 @@ def measure_full_resolution(app, doc, *, events: int) -> np.ndarray:
         kappa = np.array([1.0, 1.0, 2.0 ** ((-300 + (i * 37) % 600) / 100)])
         full = recolor(d, kappa)
         shown = cv2.resize(to_display(full), (VIEW[1], VIEW[0]), interpolation=cv2.INTER_AREA)
-        canvas.set_frame(Frame(View.RECOLORED, rgb_to_rgb32(shown), doc.shape))
+        canvas.set_frame(PreviewFrame(CanvasView.RECOLORED, rgb_to_rgb32(shown), doc.shape))
         _wait_painted(app, canvas, before)
         if i >= 2:
             out.append(time.perf_counter() - t0)
@@ -132,7 +134,7 @@ def measure_full_resolution(app, doc, *, events: int) -> np.ndarray:
 
 def measure_detail(doc, *, repeats: int = 10) -> list[tuple[str, np.ndarray]]:
     """Full-resolution detail of the visible region at 100 % and 50 % zoom, vs the whole image."""
-    renderer = Renderer(doc.photograph, doc.decomposition, max_shape=VIEW).prepare()
+    renderer = ViewRenderer(doc.photograph, doc.decomposition, max_shape=VIEW).prepare()
     rows = []
     for zoom in (1.0, 0.5):
         h, w = int(VIEW[0] / zoom), int(VIEW[1] / zoom)
@@ -140,7 +142,7 @@ def measure_detail(doc, *, repeats: int = 10) -> list[tuple[str, np.ndarray]]:
         times = []
         for i in range(repeats + 1):
             t0 = time.perf_counter()
-            renderer.render_detail(Request(View.RECOLORED, (1.0, 1.0, 1.5 + 0.01 * i)), (y0, y0 + h, x0, x0 + w))
+            views.render_detail(renderer, Request(CanvasView.RECOLORED, (1.0, 1.0, 1.5 + 0.01 * i)), (y0, y0 + h, x0, x0 + w))
             if i:
                 times.append(time.perf_counter() - t0)
         rows.append((f"detail at {100 * zoom:.0f} % ({w}x{h})", np.array(times)))

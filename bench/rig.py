@@ -2,8 +2,9 @@
 
 Prints a table for the Cornell scene at 256² and 512²:
 
-* set-up, cold (nothing cached), cold with the scene's form factors already cached (a new
-  resolution or projector pose), and cached (re-opening the same rig);
+* set-up of the realistic rig (mixed pixels supersampled 4×4, projector at half the camera's
+  resolution), cold (nothing cached) — against one sample per pixel —, cold with the scene's
+  form factors already cached (a new resolution or projector pose), and cached;
 * per-pixel form factors — the obvious alternative to interpolating node form factors —
   timed on a random subset of pixels and extrapolated to all of them;
 * one capture (ideal and realistic camera), against re-solving the radiosity system per
@@ -102,6 +103,8 @@ def main() -> None:
             res = (size, size)
             fresh = Path(tmp) / f"fresh{size}"
             t_cold, _ = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=fresh))
+            t_cold1, _ = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=Path(tmp) / f"one{size}",
+                                                 supersample=1))
             shared = Path(tmp) / "shared"
             open_rig(args.scene, resolution=(32, 32), cache_dir=shared)  # caches the form factors
             t_ff, _ = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=shared))
@@ -111,17 +114,18 @@ def main() -> None:
             n_live = int((rig.setup.quad[:rig.setup.n_pixels] >= 0).sum())
             t_pp = t_sub * n_live / n_sub
             rows.append((f"set-up {size}²: cold (nothing cached)", t_cold, None, None))
+            rows.append(("  alt: cold, one sample per pixel (supersample=1)", t_cold1, t_cold1 / t_cold, "alt / cold set-up"))
             rows.append((f"set-up {size}²: form factors cached", t_ff, None, None))
             rows.append((f"set-up {size}²: cached", t_cached, None, None))
             rows.append((f"  alt: per-pixel form factors (extrap. from {n_sub} px)", t_pp, t_pp / t_cold,
                          "alt / cold set-up"))
 
-            pattern = rng.uniform(0, 1, res + (3,)).astype(np.float32)
             for ideal in (True, False):
                 r = open_rig(args.scene, resolution=res, cache_dir=shared, ideal=ideal)
-                r.projector.show(pattern)
+                r.projector.show(rng.uniform(0, 1, r.projector.resolution + (3,)).astype(np.float32))
                 t_cap = _median_time(r.camera.capture, args.repeat)
                 rows.append((f"capture {size}² ({'ideal' if ideal else 'realistic'} camera)", t_cap, None, None))
+            pattern = rng.uniform(0, 1, rig.projector.resolution + (3,)).astype(np.float32)
             ren = rig._renderer
             rig.projector.show(pattern)
             e = ren.direct_light(rig.projector.emitted, ambient=True)
@@ -134,7 +138,8 @@ def main() -> None:
             rows.append((f"  alt: bounce iteration to 1e-6 (err {err:.1e})", t_jacobi, t_jacobi / t_solve,
                          "alt / pre-factored"))
             s = rig.setup
-            rows.append((f"  ({s.n_pixels} pixels, {len(s.quad) - s.n_pixels} hidden samples, "
+            rows.append((f"  ({s.n_pixels} pixels, {s.n_visible - s.n_pixels} sub-samples of "
+                         f"{len(s.sub_pixel)} mixed pixels, {len(s.quad) - s.n_visible} hidden samples, "
                          f"{s.mavg.shape[0]} patches, {s.gn.shape[0]} nodes)", None, None, None))
     print(f"{'':60s} {'time':>10s} {'ratio':>8s}")
     for name, t, ratio, what in rows:

@@ -106,7 +106,8 @@ def weighted_table(h, w):
 
     rng = np.random.default_rng(2)
     print(f"\nweighted decomposition on {h}x{w} RGB, 1 % noise, covariance diagonal per pixel-channel")
-    print(f"{'K':>2} | {'unweighted M/s':>14} {'GLS M/s':>8} | {'GLS / unweighted':>16} | {'noise-aware prep s':>18} {'recolor s':>9}")
+    print(f"{'K':>2} | {'unweighted M/s':>14} {'GLS M/s':>8} | {'GLS / unweighted':>16} "
+          f"| {'noise-aware prep s':>18} {'recolor s':>9}")
     small, target = synthetic_stack(3, 8, 8, noise=0.01, rng=rng)
     decompose(small, target, covariance=np.full((6,) + small.shape[1:], 1e-4, np.float32))  # compile once
     for order in (3, 4, 5, 6):

@@ -30,16 +30,37 @@ class Rig:
     identity : str, optional
         The physical rig this one stands for, which calibrations are checked against
         (default: ``name``; a ``replay:`` rig stands for the rig it recorded).
+    fingerprint : dict, optional
+        What else a calibration of this rig depends on (the virtual rig: scene content, pose,
+        ideal), merged into :attr:`fingerprint`.
     """
 
-    def __init__(self, name: str, camera: Camera, projector: Projector, *, targets=None, truth=None, identity=None):
+    def __init__(self, name: str, camera: Camera, projector: Projector, *, targets=None, truth=None, identity=None,
+                 fingerprint: dict | None = None):
         self.name = name
         self.identity = identity or name
+        self._fingerprint = dict(fingerprint or {})
         self.camera = camera
         self.projector = projector
         self.targets: dict[str, np.ndarray] = dict(targets or {})
         self.truth = truth
         self.closed = False
+
+    @property
+    def fingerprint(self) -> dict:
+        """What a calibration of this rig depends on (:attr:`engine.rig.RigLike.fingerprint`).
+
+        The backend, the identity, both resolutions, and whatever the camera and projector
+        report about themselves in their own ``fingerprint`` dicts (model, serial, screen).
+        """
+        out = {"backend": self.identity.partition(":")[0], "rig": self.identity,
+               "camera resolution": [int(v) for v in self.camera.resolution],
+               "projector resolution": [int(v) for v in self.projector.resolution]}
+        for part, device in (("camera", self.camera), ("projector", self.projector)):
+            for key, value in (getattr(device, "fingerprint", None) or {}).items():
+                out[f"{part} {key}"] = value
+        out.update(self._fingerprint)
+        return out
 
     def blank(self) -> None:
         """Show black on the projector (the safe state)."""

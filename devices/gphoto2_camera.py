@@ -206,6 +206,8 @@ class GPhoto2Camera:
         self._lock = threading.Lock()
         self._names: dict[str, str] = {}
         self.name = camera or ""
+        #: what a calibration depends on (engine.rig.RigLike.fingerprint): the body it was opened as
+        self.fingerprint = {"camera": self.name or "the first camera found"}
         self._dog = Watchdog(f"camera {camera}" if camera else "camera")
         self._cam = None
         self._cam = self._open(camera)

@@ -198,6 +198,8 @@ class HarvestersCamera:
             self._optional("GammaEnable", False, "gamma could not be switched off: check the camera's output is linear")
             self.pixel_format = self._choose_format(pixel_format)
             self.resolution = (int(self._nodes.Height.value), int(self._nodes.Width.value))
+            #: what a calibration depends on (engine.rig.RigLike.fingerprint)
+            self.fingerprint = self._identity()
             if self._node("ExposureTime") is None:
                 self.warnings.append("the camera has no ExposureTime feature: radiance is in relative units (exposure recorded as 1 s)")
             if exposure is not None:
@@ -216,6 +218,19 @@ class HarvestersCamera:
             raise
         except Exception as exc:  # genicam exceptions carry the producer's own words
             raise DeviceError(f"{what} failed: {exc}") from None
+
+    def _identity(self) -> dict[str, str]:
+        """Model and serial number: from the GenTL device module, else from the camera's own features."""
+        module = getattr(getattr(self._ia, "device", None), "node_map", None)
+        out = {}
+        for key, feature in (("model", "DeviceModelName"), ("serial", "DeviceSerialNumber")):
+            for nodes in (module, self._nodes):
+                try:
+                    out[key] = str(getattr(nodes, feature).value)
+                    break
+                except Exception:  # noqa: BLE001 - a producer without the feature raises its own type
+                    continue
+        return out
 
     def _node(self, name: str):
         try:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import shutil
 import struct
 import sys
@@ -44,14 +45,40 @@ from devices.registry import Availability, default_projector_problem, open_proje
 from engine.errors import DeviceError, InputError
 from engine.imageio import write_image
 
-__all__ = ["BenchCamera", "LoopbackRig", "linear_dng", "open_rig", "probe"]
+__all__ = ["BenchCamera", "LoopbackRig", "OFFSCREEN_SCREENS", "linear_dng", "offscreen_platform", "open_rig", "probe"]
+
+#: Qt's offscreen platform configured as a bench: a 1920x1080 laptop panel and a 1024x768 projector,
+#: ``HDMI-1``, beside it (the offscreen platform adds screens in the order of their names and
+#: makes the first one primary, so the panel's name sorts first)
+OFFSCREEN_SCREENS = [
+    {"name": "Built-in display", "x": 0, "y": 0, "width": 1920, "height": 1080,
+     "logicalDpi": 96, "logicalBaseDpi": 96, "dpr": 1},
+    {"name": "HDMI-1", "x": 1920, "y": 0, "width": 1024, "height": 768,
+     "logicalDpi": 96, "logicalBaseDpi": 96, "dpr": 1},
+]
+
+
+def offscreen_platform(folder, screens=OFFSCREEN_SCREENS) -> str:
+    """Write ``screens`` as an offscreen-platform configuration into ``folder``; return the
+    ``QT_QPA_PLATFORM`` value that uses it (set it before the Qt application starts).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> offscreen_platform(tempfile.mkdtemp()).startswith("offscreen:configfile=")
+    True
+    """
+    path = Path(folder) / "screens.json"
+    path.write_text(json.dumps({"screens": list(screens)}))
+    return f"offscreen:configfile={path}"
+
 
 #: file formats the bench camera saves, and their extensions
 FORMATS = {"tiff": ".tif", "dng": ".dng", "exr": ".exr"}
 FAULTS = ("drop", "partial", "twice", "close")
 
 _OPTIONS = ("projector", "settle", "projector_timeout", "resolution", "folder", "file_format", "timeout", "poll",
-            "quiet", "seed", "cache_dir", "patch_size", "faults")
+            "quiet", "seed", "cache_dir", "patch_size", "supersample", "faults")
 
 # the trigger: a command that leaves a "shutter" file for the bench camera (no shell, any OS)
 _SHUTTER = "import sys; open(sys.argv[1], 'a').close()"
@@ -70,8 +97,8 @@ def linear_dng(raw: np.ndarray, *, black: int, white: int) -> bytes:
     Returns
     -------
     bytes
-        A little-endian TIFF/DNG whose directory comes last, so a file cut short anywhere is
-        unreadable rather than silently incomplete.
+        A little-endian TIFF/DNG whose directory comes last, so a file cut short before its
+        last 4 bytes is unreadable rather than silently incomplete.
     """
     raw = np.ascontiguousarray(raw, dtype="<u2")
     h, w, c = raw.shape
@@ -153,7 +180,8 @@ class BenchCamera:
         Shots that failed (the screen could not be grabbed): nothing was saved for them.
     """
 
-    def __init__(self, projector, scene, folder: Path, shutter: Path, *, file_format: str = "tiff", faults=None, chunks: int = 4):
+    def __init__(self, projector, scene, folder: Path, shutter: Path, *, file_format: str = "tiff", faults=None,
+                 chunks: int = 4):
         self.projector, self.scene = projector, scene
         self.folder, self.shutter = Path(folder), Path(shutter)
         self.file_format, self.faults, self.chunks = file_format, dict(faults or {}), int(chunks)
@@ -265,9 +293,8 @@ class LoopbackRig(Rig):
 def _sensor(scene):
     """The bench camera's sensor: the virtual rig's, in radiance per second of exposure at full scale."""
     model = scene.camera.model
-    if model.ideal:
-        raise InputError("the loopback bench has a realistic sensor only (its files are 16-bit)")
-    bench = dataclasses.replace(model, electrons_per_radiance=model.electrons_per_dn * (model.white_level - model.black_level))
+    full_scale = model.white_level - model.black_level
+    bench = dataclasses.replace(model, electrons_per_radiance=model.electrons_per_dn * full_scale)
     exposure = scene.camera.exposure * model.electrons_per_radiance / bench.electrons_per_radiance
     return bench, exposure
 
@@ -295,6 +322,11 @@ def open_rig(arg: str, **options) -> LoopbackRig:
         The sensor noise seed (default 0, as the virtual rig's).
     cache_dir, patch_size
         As for the virtual rig.
+    supersample : int
+        Sub-samples per camera pixel edge (default 1). The bench's camera is much coarser than the
+        projector window (64×48 against 1024×768: 16 projector pixels per camera pixel), so
+        mixed pixels would average the finest Gray-code stripes away; the bench proves the device
+        paths, and the virtual rig's own supersampling (default 4) shows the optics.
     faults : dict[int, str], optional
         Shot number -> fault (module notes).
 
@@ -329,7 +361,9 @@ def open_rig(arg: str, **options) -> LoopbackRig:
     scene = camera = None
     try:
         vopts = {k: options[k] for k in ("seed", "cache_dir", "patch_size") if k in options}
-        scene = virtual.open_rig(arg, resolution=options.get("resolution", (48, 64)), projector_resolution=projector.resolution, **vopts)
+        vopts["supersample"] = options.get("supersample", 1)
+        resolution = options.get("resolution", (48, 64))
+        scene = virtual.open_rig(arg, resolution=resolution, projector_resolution=projector.resolution, **vopts)
         scene.camera.model, exposure = _sensor(scene)
         scene.camera.exposure = exposure
         folder = options.get("folder")

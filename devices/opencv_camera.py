@@ -154,6 +154,8 @@ class OpenCVCamera:
                 raise DeviceError(f"no camera at index {target} (not attached, or in use by another program)")
             raise DeviceError(f"OpenCV cannot read {target!r} (unknown format or codec)")
         self.backend = self._cap.getBackendName()
+        #: what a calibration depends on (engine.rig.RigLike.fingerprint)
+        self.fingerprint = {"source": str(self.source), "api": self.backend}
         self._exposure = 1.0
         self._exposure_known = not self.is_device
         try:

@@ -344,6 +344,11 @@ class QtScreenProjector:
         self.settle, self.timeout = settle, timeout
         self._sleep = self.idle if sleep is None else sleep
         self._qscreen = qscreen
+        #: what a calibration depends on (engine.rig.RigLike.fingerprint): the screen and, where its
+        #: EDID reports them, the projector's maker, model and serial number
+        self.fingerprint = {"screen": self.screen_name, "size": [int(v) for v in self.resolution],
+                            "manufacturer": qscreen.manufacturer(), "model": qscreen.model(),
+                            "serial": qscreen.serialNumber()}
         self._dpr = float(qscreen.devicePixelRatio())
         self._lost: str | None = None
         self._callbacks: list[Callable[[], None]] = []
@@ -627,4 +632,4 @@ def probe() -> list[Availability]:
         return [Availability("qtscreen:", False, str(exc))]
     if not screens:
         return [Availability("qtscreen:", False, "no screen found")]
-    return [Availability(f"qtscreen:{s.index}", True, f"{s.name} {s.width}x{s.height}") for s in screens]
+    return [Availability(f"qtscreen:{s.index}", True, f"{s.name or 'unnamed screen'} {s.width}x{s.height}") for s in screens]

@@ -32,6 +32,7 @@ _BACKENDS = {
     "loopback": "devices.loopback",
     "gphoto2": "devices.gphoto2_camera",
     "harvesters": "devices.harvesters_camera",
+    "mitsuba": "devices.mitsuba",
 }
 
 # projector backend name -> module implementing ``open_projector(arg, **options) -> Projector``,
@@ -96,7 +97,8 @@ def available() -> list[Availability]:
                 projector_problem = default_projector_problem()
             if projector_problem:
                 hint = f"projector: {projector_problem} (pass projector='{_default_projector()}:0')"
-                entries = [Availability(e.name, False, f"{e.reason}; {hint}" if e.reason else hint) if e.ok else e for e in entries]
+                entries = [Availability(e.name, False, f"{e.reason}; {hint}" if e.reason else hint) if e.ok else e
+                           for e in entries]
         out.extend(entries)
     return out
 

@@ -196,7 +196,8 @@ def open_rig(arg: str, **options) -> Rig:
     bit_depth = session.metadata.get("projector_bit_depth", 8)
     projector = ReplayProjector(session.projector_resolution, bit_depth if isinstance(bit_depth, int) else 8)
     camera = ReplayCamera(session, projector)
-    return Rig(f"replay:{arg}", camera, projector, targets=targets, identity=session.rig_name)
+    return Rig(f"replay:{arg}", camera, projector, targets=targets, identity=session.rig_name,
+               fingerprint=session.fingerprint)
 
 
 def probe() -> list[Availability]:

@@ -4,8 +4,9 @@
 known reflectance lit like the target fixes ``E_p`` per channel, and then ``ρ = D / E_p``.
 Two references:
 
-- a ColorChecker beside the target, facing the projector the same way: one scale per
-  channel fitted to its 24 patches (:func:`fit_albedo_scale`);
+- a ColorChecker beside the target, in the same plane: one scale per channel fitted to its
+  24 patches, times the way the projector's light varies over that plane
+  (:func:`fit_albedo_scale`);
 - a card of known reflectance laid over the target (the paper's Fig. 7 swaps papers the same
   way): a scale per pixel (:func:`reference_scale`), exact whatever the geometry.
 
@@ -46,6 +47,9 @@ class AlbedoScale:
         Patches the fit kept (the rest were missing or outliers).
     source : str
         ``"checker"`` or ``"reference"``.
+    plane : (3,) float64 or None
+        The projector's light over the chart's plane, ``f(x, y) = (a + b x + c y)³`` in
+        projector pixels, 1 at the chart's centre (None: taken as uniform).
     """
 
     scale: np.ndarray
@@ -53,6 +57,14 @@ class AlbedoScale:
     residual: np.ndarray | None = None
     used: np.ndarray | None = None
     source: str = "checker"
+    plane: np.ndarray | None = None
+
+    def light(self, projector_xy) -> np.ndarray:
+        """``f``: the projector's light at projector pixels ``(..., 2)`` relative to the chart's centre."""
+        xy = np.asarray(projector_xy, np.float64)
+        if self.plane is None:
+            return np.ones(xy.shape[:-1])
+        return _plane_light(self.plane, xy)
 
     @property
     def rms_residual(self) -> float:
@@ -61,7 +73,7 @@ class AlbedoScale:
             return 0.0
         return float(np.sqrt(np.mean(self.residual[self.used] ** 2)))
 
-    def albedo(self, direct, target) -> np.ndarray:
+    def albedo(self, direct, target, projector_xy=None) -> np.ndarray:
         """The target's absolute albedo.
 
         Parameters
@@ -71,11 +83,14 @@ class AlbedoScale:
         target : (H, W) bool
             Target pixels; those where D is 0 (not measured) are skipped, and for a
             per-pixel reference those it does not cover.
+        projector_xy : (H, W, 2) float, optional
+            Projector pixel (x, y) of each camera pixel (the target's correspondence); needed
+            when the fit modelled the projector's light over the chart's plane.
 
         Returns
         -------
         (3,) float64
-            ``mean D / scale`` over the target (per-pixel scale: mean of ``D / scale``).
+            ``mean D / (scale f)`` over the target (per-pixel scale: mean of ``D / scale``).
 
         Raises
         ------
@@ -99,12 +114,20 @@ class AlbedoScale:
         if not use.any():
             where = " under the reference card" if self.valid is not None else ""
             raise InputError(f"no target pixel has a measured D{where}")
-        if self.scale.ndim == 1:
+        if self.scale.ndim == 1 and self.plane is None:
             return d[use].astype(np.float64).mean(axis=0) / self.scale
+        if self.scale.ndim == 1:
+            if projector_xy is None:
+                raise InputError("this albedo scale models the projector's light over the chart's plane: "
+                                 "give the target's projector coordinates (its correspondence)")
+            xy = np.asarray(projector_xy, np.float64)
+            if xy.shape != t.shape + (2,):
+                raise InputError(f"projector_xy must be (H, W, 2) = {t.shape + (2,)}, got {xy.shape}")
+            return (d[use].astype(np.float64) / self.light(xy[use])[:, None]).mean(axis=0) / self.scale
         return (d[use].astype(np.float64) / self.scale[use]).mean(axis=0)
 
 
-def fit_albedo_scale(patch_direct, reflectances, *, outlier: float = OUTLIER) -> AlbedoScale:
+def fit_albedo_scale(patch_direct, reflectances, *, patch_xy=None, outlier: float = OUTLIER) -> AlbedoScale:
     """Fit D = scale · ρ per channel over a chart's patches.
 
     Parameters
@@ -114,6 +137,9 @@ def fit_albedo_scale(patch_direct, reflectances, *, outlier: float = OUTLIER) ->
         image); NaN for a patch that was not measured.
     reflectances : (N, 3) float
         The patches' albedo (:func:`engine.checker.reference_reflectances`).
+    patch_xy : (N, 2) float, optional
+        Projector pixel (x, y) of each patch's centre. Given, the projector's light over the
+        chart's plane is fitted too (``D = scale · ρ · f(x, y)``); else it is taken as uniform.
     outlier : float
         Patches off the first fit by more than this relative amount in any channel (a
         misplaced corner, a specular glint, a shadow) are dropped and the fit repeated once.
@@ -130,9 +156,14 @@ def fit_albedo_scale(patch_direct, reflectances, *, outlier: float = OUTLIER) ->
 
     Notes
     -----
-    Least squares through the origin per channel, ``s = Σ D ρ / Σ ρ²``: bright patches
-    (best measured) weigh most. The fit assumes the chart is evenly lit by the projector;
-    its residual says how far that holds.
+    Least squares through the origin per channel, ``s = Σ D ρ f / Σ (ρ f)²``: bright patches
+    (best measured) weigh most. A pinhole projector's light on a plane is
+    ``cos θ / (d² cos³ α) = h / z³`` (θ incidence, α off-axis angle, h the projector's distance
+    to the plane, z depth along its axis), and ``1 / z`` is affine in projector pixels on a
+    plane: so ``(D / ρ)^{1/3}`` is affine in ``(x, y)`` over the chart, fitted by least
+    squares on the patches. A target in the chart's plane then gets its own light, even from
+    a projector beside the camera; one elsewhere does not (its chromaticity stays right).
+    The residual says how well the model holds.
 
     Examples
     --------
@@ -147,24 +178,54 @@ def fit_albedo_scale(patch_direct, reflectances, *, outlier: float = OUTLIER) ->
         raise InputError(f"patch_direct {d.shape} and reflectances {rho.shape} must both be (N, 3)")
     if not np.all(np.isfinite(rho)) or np.any(rho <= 0) or np.any(rho >= 1):
         raise InputError("reflectances must be finite and in (0, 1)")
+    xy = None
+    if patch_xy is not None:
+        xy = np.asarray(patch_xy, np.float64)
+        if xy.shape != (len(d), 2):
+            raise InputError(f"patch_xy must be ({len(d)}, 2) projector pixels, got {xy.shape}")
     used = np.all(np.isfinite(d), axis=1) & np.all(d > 0, axis=1)
-    scale = _fit(d, rho, used)
-    for _ in range(2):
-        residual = d / (scale * rho) - 1
+    if xy is not None:
+        used &= np.all(np.isfinite(xy), axis=1)
+    scale, plane = _fit(d, rho, xy, used)
+    for _ in range(3):
+        residual = d / (scale * rho * _light(plane, xy, len(d))[:, None]) - 1
         keep = used & np.all(np.abs(np.nan_to_num(residual, nan=np.inf)) <= outlier, axis=1)
         if keep.sum() < MIN_PATCHES or np.array_equal(keep, used):
             break
         used = keep
-        scale = _fit(d, rho, used)
-    residual = d / (scale * rho) - 1
-    return AlbedoScale(scale, residual=residual, used=used, source="checker")
+        scale, plane = _fit(d, rho, xy, used)
+    residual = d / (scale * rho * _light(plane, xy, len(d))[:, None]) - 1
+    return AlbedoScale(scale, residual=residual, used=used, source="checker", plane=plane)
 
 
-def _fit(d: np.ndarray, rho: np.ndarray, used: np.ndarray) -> np.ndarray:
+def _fit(d: np.ndarray, rho: np.ndarray, xy: np.ndarray | None, used: np.ndarray):
+    """Per-channel scale and (if ``xy``) the light's plane, from the ``used`` patches."""
     if used.sum() < MIN_PATCHES:
         raise InputError(f"only {int(used.sum())} checker patches have a measured D; at least {MIN_PATCHES} are "
                          "needed: is the chart lit by the projector and placed correctly?")
-    return (d[used] * rho[used]).sum(axis=0) / (rho[used] ** 2).sum(axis=0)
+    plane = None
+    if xy is not None:
+        cube = np.cbrt((d[used] / rho[used]).mean(axis=1))
+        design = np.c_[np.ones(int(used.sum())), xy[used]]
+        coef, *_ = np.linalg.lstsq(design, cube, rcond=None)
+        centre = xy[used].mean(axis=0)
+        norm = coef[0] + coef[1:] @ centre  # f = 1 at the chart's centre
+        if norm <= 0:
+            raise InputError("the chart's direct light does not fit a projector lighting a plane; "
+                             "check the corners, or that the chart is flat")
+        plane = coef / norm
+    f = _light(plane, xy, len(d))[used, None]
+    return (d[used] * rho[used] * f).sum(axis=0) / ((rho[used] * f) ** 2).sum(axis=0), plane
+
+
+def _light(plane: np.ndarray | None, xy: np.ndarray | None, n: int) -> np.ndarray:
+    if plane is None or xy is None:
+        return np.ones(n)
+    return _plane_light(plane, xy)
+
+
+def _plane_light(plane: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    return np.maximum(plane[0] + xy[..., 0] * plane[1] + xy[..., 1] * plane[2], 0.0) ** 3
 
 
 def reference_scale(direct_reference, reflectance, covered) -> AlbedoScale:

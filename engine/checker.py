@@ -137,25 +137,37 @@ class Checker:
         v, u = np.divmod(np.arange(PATCHES), COLUMNS)
         return _apply(self.homography(), np.stack([u + 0.5, v + 0.5], 1))
 
-    def patch_masks(self, *, fraction: float = 0.5) -> np.ndarray:
-        """(24, H, W) bool: the central ``fraction`` (per side) of each patch cell.
+    def labels(self, *, fraction: float = 0.5) -> np.ndarray:
+        """(H, W) int8: the patch (0–23) whose cell's central ``fraction`` (per side) holds the
+        pixel's centre, −1 elsewhere.
 
-        The default keeps clear of the chart's black gaps and of blur at patch edges.
+        The default keeps clear of the chart's black gaps and of blur at patch edges. Only the
+        chart's bounding box is visited, so a chart in a large photograph costs little.
         """
         if not 0 < fraction <= 1:
             raise InputError(f"fraction must be in (0, 1], got {fraction!r}")
         h, w = self.shape
-        yy, xx = np.mgrid[:h, :w]
+        out = np.full((h, w), -1, np.int8)
+        x0, y0 = np.maximum(np.floor(self.corners.min(axis=0)).astype(int), 0)
+        x1, y1 = np.minimum(np.ceil(self.corners.max(axis=0)).astype(int) + 1, [w, h])
+        if x1 <= x0 or y1 <= y0:
+            return out
+        yy, xx = np.mgrid[y0:y1, x0:x1]
         uv = _apply(np.linalg.inv(self.homography()), np.stack([xx.ravel(), yy.ravel()], 1).astype(np.float64))
         cell = np.floor(uv)
         inner = np.abs(uv - cell - 0.5) < fraction / 2  # pixel centre in the cell's central part
         ok = inner.all(axis=1) & (cell[:, 0] >= 0) & (cell[:, 0] < COLUMNS) & (cell[:, 1] >= 0) & (cell[:, 1] < ROWS)
-        index = np.where(ok, cell[:, 1] * COLUMNS + cell[:, 0], -1).astype(np.int64)
-        return (index[None, :] == np.arange(PATCHES)[:, None]).reshape(PATCHES, h, w)
+        index = np.where(ok, cell[:, 1] * COLUMNS + cell[:, 0], -1).astype(np.int8)
+        out[y0:y1, x0:x1] = index.reshape(y1 - y0, x1 - x0)
+        return out
+
+    def patch_masks(self, *, fraction: float = 0.5) -> np.ndarray:
+        """(24, H, W) bool: one mask per patch (see :meth:`labels`; for small images)."""
+        return self.labels(fraction=fraction)[None] == np.arange(PATCHES, dtype=np.int8)[:, None, None]
 
     def mask(self, *, fraction: float = 0.5) -> np.ndarray:
         """(H, W) bool: every patch's sampled pixels (a target for measuring D on the chart)."""
-        return self.patch_masks(fraction=fraction).any(axis=0)
+        return self.labels(fraction=fraction) >= 0
 
 
 def checker_from_corners(corners, shape) -> Checker:
@@ -222,7 +234,8 @@ def detect_checker(image) -> Checker:
     Notes
     -----
     colour-checker-detection's segmentation detector finds the patch area, run on the image
-    scaled so its 90th percentile is 1 (it thresholds sRGB-encoded values; a lamp in view
+    (area-averaged down to the detector's 1440-px working width first: a 24 MP photograph
+    takes seconds, not a minute) scaled so its 90th percentile is 1 (it thresholds sRGB-encoded values; a lamp in view
     would make a 99th-percentile scale too dark). Its corners come back from its resampled
     working copy to this image's pixels; of the chart's four orientations the one whose patch
     colours fit the reference reflectances best (after a per-channel scale, so a coloured
@@ -231,12 +244,18 @@ def detect_checker(image) -> Checker:
     img = check_float_image("image", image, ndim=3)
     if img.shape[2] != 3:
         raise InputError(f"image must have 3 channels, got shape {img.shape}")
+    import cv2
+
     h, w = img.shape[:2]
-    level = float(np.percentile(img, 90))
+    ccd = _detector()
+    work_w = int(ccd.SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC["working_width"])
+    small = img.astype(np.float32, copy=False)
+    if w > work_w:  # area-average a large photograph down to the detector's working width first
+        small = cv2.resize(small, (work_w, int(h * work_w / w)), interpolation=cv2.INTER_AREA)
+    level = float(np.percentile(small, 90))
     if level <= 0:
         raise InputError("the image is black: no colour checker to find")
-    scaled = np.clip(img.astype(np.float32) / level, 0.0, 1.0)
-    ccd = _detector()
+    scaled = np.clip(small / level, 0.0, 1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         # the segmenter encodes to sRGB before resampling (resampling linear values first
@@ -246,10 +265,9 @@ def detect_checker(image) -> Checker:
     if len(rectangles) == 0:
         raise InputError("no ColorChecker found in the photograph: place its four corners by hand "
                          "(dark skin, bluish green, black, white)")
-    work_w = float(ccd.SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC["working_width"])
     work_h = float(int(h * work_w / w))
 
-    def to_image(points):
+    def to_image(points):  # the detector's working pixels → this image's
         points = np.asarray(points, np.float64).reshape(-1, 2)
         return np.c_[(points[:, 0] + 0.5) * w / work_w - 0.5, (points[:, 1] + 0.5) * h / work_h - 0.5]
 
@@ -268,6 +286,11 @@ def _detector():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             import colour_checker_detection
+    except ImportError:
+        raise InputError(
+            "automatic colour-checker detection needs colour-checker-detection "
+            "(pip install --no-deps colour-checker-detection); place the chart's four corners by hand instead"
+        ) from None
     finally:
         np.set_printoptions(**printing)
     return colour_checker_detection
@@ -312,9 +335,7 @@ def _oriented(image: np.ndarray, corners: np.ndarray) -> Checker:
     for order in ([0, 1, 2, 3], [0, 3, 2, 1]):
         for shift in range(4):
             c = Checker(np.roll(corners[order], shift, axis=0), image.shape[:2], "detected")
-            means, counts = sample_patches(image, c)
-            if np.any(counts == 0):
-                continue
+            means = _point_means(image, c)
             scale = (means * rho).sum(axis=0) / (rho**2).sum(axis=0)
             err = float(np.sum((means / np.maximum(scale, 1e-30) - rho) ** 2))
             if err < best_err:
@@ -323,6 +344,19 @@ def _oriented(image: np.ndarray, corners: np.ndarray) -> Checker:
         raise InputError("a ColorChecker was found but its patches are too small to sample: move the camera "
                          "closer or place the four corners by hand")
     return best
+
+
+def _point_means(image: np.ndarray, checker: Checker, *, points: int = 5, fraction: float = 0.5) -> np.ndarray:
+    """(24, C): each patch's mean over a ``points × points`` grid in its central part (nearest
+    pixels): enough to tell the chart's orientation, at any image size."""
+    step = (np.arange(points) + 0.5) / points * fraction + (0.5 - fraction / 2)
+    du, dv = np.meshgrid(step, step)
+    v, u = np.divmod(np.arange(PATCHES), COLUMNS)
+    uv = np.stack([(u[:, None] + du.ravel()).ravel(), (v[:, None] + dv.ravel()).ravel()], 1)
+    xy = np.rint(_apply(checker.homography(), uv)).astype(np.intp)
+    h, w = checker.shape
+    xs, ys = np.clip(xy[:, 0], 0, w - 1), np.clip(xy[:, 1], 0, h - 1)
+    return image[ys, xs].astype(np.float64).reshape(PATCHES, points * points, -1).mean(axis=1)
 
 
 def sample_patches(image, checker: Checker, *, fraction: float = 0.5, valid=None) -> tuple[np.ndarray, np.ndarray]:
@@ -334,7 +368,7 @@ def sample_patches(image, checker: Checker, *, fraction: float = 0.5, valid=None
         Any per-pixel quantity: the photograph, or the direct image D.
     checker : Checker
     fraction : float
-        Central part of each patch cell sampled, see :meth:`Checker.patch_masks`.
+        Central part of each patch cell sampled, see :meth:`Checker.labels`.
     valid : (H, W) bool, optional
         Pixels that may be used (e.g. where D was measured).
 
@@ -348,12 +382,14 @@ def sample_patches(image, checker: Checker, *, fraction: float = 0.5, valid=None
     img = check_float_image("image", image, ndim=3)
     if img.shape[:2] != tuple(checker.shape):
         raise InputError(f"image is {img.shape[:2]} but the checker was placed in a {tuple(checker.shape)} image")
-    masks = checker.patch_masks(fraction=fraction)
+    labels = checker.labels(fraction=fraction)
     if valid is not None:
-        masks &= check_mask("valid", valid, img.shape[:2])[None]
-    counts = masks.reshape(PATCHES, -1).sum(axis=1)
-    flat = img.reshape(-1, img.shape[2]).astype(np.float64)
-    sums = masks.reshape(PATCHES, -1).astype(np.float64) @ flat
+        labels = np.where(check_mask("valid", valid, img.shape[:2]), labels, -1)
+    ys, xs = np.nonzero(labels >= 0)
+    index = labels[ys, xs].astype(np.intp)
+    counts = np.bincount(index, minlength=PATCHES)
+    values = img[ys, xs].astype(np.float64)
+    sums = np.stack([np.bincount(index, weights=values[:, c], minlength=PATCHES) for c in range(img.shape[2])], 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         means = np.where(counts[:, None] > 0, sums / np.maximum(counts, 1)[:, None], np.nan)
     return means, counts

@@ -31,9 +31,11 @@ __all__ = [
     "direct_colour",
     "kappa_for_albedo",
     "kappa_for_colour",
+    "kappa_ceiling",
     "kappa_limit",
     "luminance_weights",
     "parse_colour",
+    "pick_colour",
     "to_hex",
     "to_lab",
     "to_srgb",
@@ -120,8 +122,9 @@ def parse_colour(text: str) -> np.ndarray:
     raw = text.strip()
     space, _, body = raw.partition(":") if ":" in raw else ("", "", raw)
     space = space.strip().lower()
-    if not space and _HEX.match(body.strip()):
-        digits = _HEX.match(body.strip()).group(1)
+    hex_match = None if space else _HEX.match(body.strip())
+    if hex_match is not None:
+        digits = hex_match.group(1)
         if len(digits) == 3:
             digits = "".join(d * 2 for d in digits)
         encoded = np.array([int(digits[i:i + 2], 16) for i in (0, 2, 4)], np.float64) / 255.0
@@ -200,6 +203,52 @@ def to_lab(linear, *, exposure: float = 0.0) -> np.ndarray:
     colour = colour_science()
     xyz = _srgb_to_xyz() @ (_colour3("linear", linear) * 2.0 ** float(exposure))
     return np.asarray(colour.XYZ_to_Lab(xyz, _white_xy()), np.float64) + 0.0
+
+
+def pick_colour(image, x: float, y: float, *, radius: int = 2, encoded: bool = False) -> np.ndarray:
+    """An eyedropper: the mean colour of a small square around a pixel.
+
+    Parameters
+    ----------
+    image : (H, W, 3) float
+        Linear radiance (the photograph), or sRGB-encoded 0–1 values (a reference picture
+        from elsewhere) with ``encoded=True``.
+    x, y : float
+        Pixel (column, row) picked; the square is clipped to the image.
+    radius : int
+        Half-size of the square: ``(2 radius + 1)²`` pixels averaged (noise, texture).
+    encoded : bool
+        Decode sRGB to linear before averaging (averaging encoded values would bias dark).
+
+    Returns
+    -------
+    (3,) float64
+        Linear RGB.
+
+    Raises
+    ------
+    InputError
+        A point outside the image, a negative radius, or a non-RGB image.
+
+    Examples
+    --------
+    >>> img = np.zeros((5, 5, 3), np.float32); img[1:4, 1:4] = [0.2, 0.4, 0.6]
+    >>> np.round(pick_colour(img, 2, 2, radius=1), 3).tolist()
+    [0.2, 0.4, 0.6]
+    """
+    img = check_float_image("image", image, ndim=3)
+    if img.shape[2] != 3:
+        raise InputError(f"image must be RGB (H, W, 3), got shape {img.shape}")
+    h, w = img.shape[:2]
+    if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
+        raise InputError(f"radius must be a non-negative integer (pixels), got {radius!r}")
+    col, row = int(round(float(x))), int(round(float(y)))
+    if not (0 <= col < w and 0 <= row < h):
+        raise InputError(f"the point ({x}, {y}) is outside the {w}×{h} image")
+    patch = img[max(row - radius, 0):row + radius + 1, max(col - radius, 0):col + radius + 1].astype(np.float64)
+    if encoded:
+        patch = _decode_srgb(np.clip(patch, 0.0, 1.0))
+    return patch.reshape(-1, 3).mean(axis=0)
 
 
 def direct_colour(decomposition: Decomposition, *, direct=None) -> np.ndarray:
@@ -377,6 +426,40 @@ def kappa_limit(decomposition: Decomposition) -> np.ndarray:
     last, before = comps[-1], comps[-2]
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(last > 0, before / np.where(last > 0, last, 1.0), np.inf)
+
+
+def kappa_ceiling(decomposition: Decomposition, albedo=None) -> np.ndarray:
+    """Upper end of the κ range a control should offer, per channel (the lower end is 0).
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+    albedo : (3,) float, optional
+        The target's absolute albedo (:meth:`engine.albedo.AlbedoScale.albedo`), when a
+        reference measured it.
+
+    Returns
+    -------
+    (3,) float64
+        With the albedo: ``1 / albedo`` (an albedo of 1 is impossible), or
+        :func:`kappa_limit` if that is lower. Without: :func:`kappa_limit` (``inf`` when
+        nothing bounds it: the caller keeps its own display range).
+
+    Examples
+    --------
+    >>> comps = np.zeros((2, 1, 2, 3), np.float32)
+    >>> comps[0, 0, 0] = 1.0; comps[1, 0, 0] = 0.1
+    >>> d = Decomposition(comps, np.zeros((1, 2, 3), np.float32), np.array([[True, False]]))
+    >>> kappa_ceiling(d).round(3).tolist(), kappa_ceiling(d, [0.5, 0.05, 0.2]).round(3).tolist()
+    ([10.0, 10.0, 10.0], [2.0, 10.0, 5.0])
+    """
+    limit = kappa_limit(decomposition)
+    if albedo is None:
+        return limit
+    rho = _colour3("albedo", albedo)
+    if np.any(rho <= 0) or np.any(rho >= 1):
+        raise InputError(f"albedo must be in (0, 1) in every channel, got {rho.tolist()}")
+    return np.minimum(limit, 1.0 / rho)
 
 
 @dataclass(frozen=True)

@@ -60,6 +60,87 @@ class Decomposition:
     residual: np.ndarray | None = None
     covariance: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        comps, unreached, target = self.components, self.unreached, self.target
+        if not isinstance(comps, np.ndarray) or comps.dtype.kind != "f" or comps.ndim != 4:
+            raise InputError(f"components must be a float array (K, H, W, C), got {_describe(comps)}")
+        k, h, w, c = comps.shape
+        if not 1 <= k <= MAX_ORDER or min(h, w, c) < 1:
+            raise InputError(f"components must be (K, H, W, C) with K in 1..{MAX_ORDER} and H, W, C >= 1, "
+                             f"got shape {comps.shape}")
+        if not isinstance(unreached, np.ndarray) or unreached.dtype.kind != "f" or unreached.shape != (h, w, c):
+            raise InputError(f"unreached must be a float array of shape {(h, w, c)}, got {_describe(unreached)}")
+        if not isinstance(target, np.ndarray) or target.dtype != bool or target.shape != (h, w):
+            raise InputError(f"target must be a bool array of shape {(h, w)}, got {_describe(target)}")
+        if self.residual is not None and (not isinstance(self.residual, np.ndarray) or self.residual.shape != (h, w)):
+            raise InputError(f"residual must be None or an array of shape {(h, w)}, got {_describe(self.residual)}")
+        check_choice("constraint", self.constraint, Constraint)
+        if not isinstance(self.unreached_light, (bool, np.bool_)):
+            raise InputError(f"unreached_light must be True or False, got {self.unreached_light!r}")
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The decomposition as named plain arrays (no pickle needed), e.g. for a session's cache.
+
+        Returns
+        -------
+        dict
+            ``components``, ``unreached``, ``target``, ``residual`` and ``covariance`` (when there are),
+            ``flags`` ``(1,) bool`` (``unreached_light``) and ``constraint`` ``(16,) uint8``
+            (the mode's name, space-padded). :meth:`from_arrays` reads it back.
+
+        Examples
+        --------
+        >>> d = Decomposition(np.ones((2, 1, 2, 3), np.float32), np.zeros((1, 2, 3), np.float32),
+        ...                   np.array([[True, False]]))
+        >>> back = Decomposition.from_arrays(d.to_arrays())
+        >>> back.order, back.constraint, bool(np.array_equal(back.target, d.target))
+        (2, 'ordered', True)
+        """
+        arrays = {
+            "components": self.components,
+            "unreached": self.unreached,
+            "target": self.target,
+            "flags": np.array([self.unreached_light], bool),
+            "constraint": np.frombuffer(str(self.constraint).encode().ljust(16), np.uint8),
+        }
+        if self.residual is not None:
+            arrays["residual"] = self.residual
+        if self.covariance is not None:
+            arrays["covariance"] = self.covariance
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> Decomposition:
+        """Rebuild a decomposition from :meth:`to_arrays`' output, refusing anything malformed.
+
+        Raises
+        ------
+        InputError
+            A missing array, a wrong dtype or shape, or non-finite components.
+        """
+        missing = sorted({"components", "unreached", "target", "flags", "constraint"} - set(arrays))
+        if missing:
+            raise InputError(f"the arrays lack {missing}; not a decomposition")
+        flags, code = np.asarray(arrays["flags"]), np.asarray(arrays["constraint"])
+        if flags.shape != (1,) or flags.dtype != bool or code.dtype != np.uint8 or code.ndim != 1:
+            raise InputError("the arrays' flags or constraint are malformed; not a decomposition")
+        try:
+            constraint = bytes(code).decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise InputError("the arrays' constraint is not a mode name; not a decomposition") from None
+        d = cls(np.asarray(arrays["components"]), np.asarray(arrays["unreached"]), np.asarray(arrays["target"]),
+                constraint, bool(flags[0]), None if "residual" not in arrays else np.asarray(arrays["residual"]),
+                None if "covariance" not in arrays else np.asarray(arrays["covariance"]))
+        check_float_image("components", d.components, ndim=4)
+        check_float_image("unreached", d.unreached, ndim=3)
+        if d.covariance is not None:
+            k = d.order
+            check_float_image("covariance", d.covariance, ndim=4)
+            if d.covariance.shape != (k * (k + 1) // 2,) + d.shape:
+                raise InputError(f"the arrays' covariance has shape {d.covariance.shape}, not "
+                                 f"{(k * (k + 1) // 2,) + d.shape}; not a decomposition")
+        return d
+
     @property
     def order(self) -> int:
         """K, the number of inside components."""
@@ -308,6 +389,12 @@ def observe(decomposition: Decomposition, *, kappa=None, order: int | None = Non
     return obs
 
 
+def _describe(value) -> str:
+    if isinstance(value, np.ndarray):
+        return f"{value.dtype} array of shape {value.shape}"
+    return type(value).__name__
+
+
 def _check_observations(observations) -> np.ndarray:
     obs = check_float_image("observations", observations, ndim=4)
     k, h, w, c = obs.shape
@@ -342,7 +429,8 @@ def _decompose_tile(obs, target, components, unreached, residual, rows, inside_s
         out, extra = components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1)
         warm = inside_solver.basis is not None
         if warm:  # the unweighted optimum: a start that usually already has the weighted active set
-            solve_systems(b, selector, [inside_solver, outside_solver], [inside_rows, outside_rows], out, extra, res_num)
+            solve_systems(b, selector, [inside_solver, outside_solver], [inside_rows, outside_rows], out, extra,
+                          res_num)
         solve_weighted(b, cov_in[:, y0:y1].reshape(cov_in.shape[0], -1), selector, [inside_solver, outside_solver],
                        [inside_rows, outside_rows], out, extra, packed, res_num, warm=warm)
         cov_out[:, y0:y1] = packed.reshape(cov_out[:, y0:y1].shape)

@@ -23,6 +23,9 @@ from engine.decompose import Decomposition
 from engine.errors import InputError
 from engine.progress import Progress, ShouldStop, checkpoint, report
 
+#: Largest filter radius in pixels (the interreflections' low-pass scale; beyond it the filter is a plain blur).
+MAX_RADIUS = 1024
+
 
 def denoise_components(decomposition: Decomposition, photograph, *, radius: int = 4, eps: float = 1e-3,
                        progress: Progress | None = None, should_stop: ShouldStop | None = None) -> Decomposition:
@@ -66,8 +69,10 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     photo = check_float_image("photograph", photograph, ndim=3)
     if photo.shape != (h, w, c):
         raise InputError(f"photograph must have the decomposition's shape {(h, w, c)}, got {photo.shape}")
-    if int(radius) < 1 or not np.isfinite(eps) or eps <= 0:
-        raise InputError(f"radius must be >= 1 and eps > 0, got radius={radius!r}, eps={eps!r}")
+    if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or not 1 <= radius <= MAX_RADIUS:
+        raise InputError(f"radius must be an integer number of pixels in 1..{MAX_RADIUS}, got {radius!r}")
+    if not np.isfinite(eps) or eps <= 0:
+        raise InputError(f"eps must be a positive number, got {eps!r}")
     target = decomposition.target
     inside = target[:, :, None]
     comps = decomposition.components.astype(np.float32, copy=True)

@@ -22,3 +22,20 @@ class SessionError(AlbeditError, RuntimeError):
 
 class Cancelled(AlbeditError):
     """Long work was stopped on request; everything finished before the stop is kept."""
+
+
+class DiskFull(SessionError):
+    """A session write failed because its disk is full; everything written before is kept.
+
+    Attributes
+    ----------
+    free : int
+        Bytes free on the session's disk when the write failed.
+    needed : int
+        Bytes the failed write needed (an estimate: more is needed for what is still to come).
+    """
+
+    def __init__(self, message: str, *, free: int, needed: int) -> None:
+        super().__init__(message)
+        self.free = free
+        self.needed = needed

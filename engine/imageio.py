@@ -25,6 +25,7 @@ a preview PNG, and its output is never used for measurement.
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -48,8 +49,10 @@ __all__ = [
     "atomic_write",
     "decode_raw",
     "image_info",
+    "is_temp_name",
     "raw_postprocess_options",
     "read_image",
+    "read_mask",
     "read_metadata",
     "read_raw_bytes",
     "srgb_decode",
@@ -195,14 +198,15 @@ def to_display(image: np.ndarray, *, exposure: float = 0.0) -> np.ndarray:
 # ----------------------------------------------------------------------------- atomic writes
 
 
-def atomic_write(path, writer: Callable[[Path], None], *, mode: int | None = None, exclusive: bool = False) -> Path:
+def atomic_write(path, writer: Callable[[Path], None], *, mode: int | None = None, exclusive: bool = False,
+                 verify: Callable[[Path], None] | None = None) -> Path:
     """Write a file so that it appears under ``path`` complete or not at all.
 
     ``writer(temp_path)`` writes the content to a temporary file in the same folder (a hidden
     name that starts with ``"."`` and contains ``".tmp"``, keeping ``path``'s extension). The
-    temporary file is flushed to disk, its permissions set to ``mode``, and it is renamed over
-    ``path`` with ``os.replace``; the folder is then flushed too. If anything fails, the
-    temporary file is removed and ``path`` is left as it was.
+    temporary file is flushed to disk, checked by ``verify``, its permissions set to ``mode``,
+    and it is renamed over ``path`` with ``os.replace``; the folder is then flushed too. If
+    anything fails, the temporary file is removed and ``path`` is left as it was.
 
     Parameters
     ----------
@@ -215,6 +219,9 @@ def atomic_write(path, writer: Callable[[Path], None], *, mode: int | None = Non
     exclusive : bool, keyword-only
         Refuse to replace an existing file: the final name is created with a hard link, which
         fails atomically if the name exists (``FileExistsError``, temporary file removed).
+    verify : callable(Path) -> None, optional, keyword-only
+        Reads the flushed temporary file back and raises ``OSError`` if it is not what was
+        written (a full disk can truncate a file while the writer reports success).
 
     Returns
     -------
@@ -241,6 +248,8 @@ def atomic_write(path, writer: Callable[[Path], None], *, mode: int | None = Non
     try:
         writer(temp)
         _fsync_file(temp)
+        if verify is not None:
+            verify(temp)
         if mode is not None:
             os.chmod(temp, mode)
         if exclusive:
@@ -287,7 +296,14 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def _is_temp_name(name: str) -> bool:
+def is_temp_name(name: str) -> bool:
+    """Whether a file name is the temporary file of an :func:`atomic_write` (left behind only by a killed write).
+
+    Examples
+    --------
+    >>> is_temp_name(".c1.exr.0a1b2c3d4e5f.tmp.exr"), is_temp_name("c1.exr")
+    (True, False)
+    """
     return name.startswith(".") and _TEMP_MARK in name
 
 
@@ -332,12 +348,32 @@ def _check_readable(path) -> Path:
     return path
 
 
-def _oiio_open(path: Path):
+def _oiio_error(source=None) -> str:
+    """OpenImageIO's error message (of ``source``, else the global one), safe to print.
+
+    Its messages can quote bytes of a corrupt file that are not UTF-8, which the Python
+    binding cannot decode: such a message is replaced by a plain description.
+    """
+    texts = []
+    for get in ([source.geterror] if source is not None else []) + [oiio.geterror]:
+        try:
+            texts.append(get())
+        except UnicodeDecodeError:
+            texts.append("the file's header holds bytes that are not text (a corrupt or truncated file)")
+    return next((t for t in texts if t), "unknown OpenImageIO error").strip()
+
+
+def _input_config():
+    """How every file is opened: colour channels as stored, never multiplied by alpha."""
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
-    inp = oiio.ImageInput.open(str(path), config)
+    return config
+
+
+def _oiio_open(path: Path):
+    inp = oiio.ImageInput.open(str(path), _input_config())
     if inp is None:
-        raise InputError(f"{path}: cannot read image ({oiio.geterror() or 'unknown OpenImageIO error'})")
+        raise InputError(f"{path}: cannot read image ({_oiio_error()})")
     return inp
 
 
@@ -388,14 +424,14 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
     -------
     (H, W, C) float32
         Linear values; C is the file's channel count (1 for grey, 3 for RGB, 4 with alpha).
-        Integer files are scaled to [0, 1] (65535 → 1.0). Float files are returned as stored,
-        including any non-finite values they contain.
+        Integer files are scaled to [0, 1] (65535 → 1.0). Float files are returned as stored.
 
     Raises
     ------
     InputError
-        Missing file, unsupported extension, unreadable or corrupt file (the message names
-        the path and the problem).
+        Missing file, unsupported extension, unreadable or corrupt file — including one the
+        decoder read with a warning (a truncated JPEG) and one holding non-finite values (a
+        damaged float TIFF or EXR) — the message names the path and the problem.
 
     Notes
     -----
@@ -421,13 +457,17 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
         if spec.deep:
             raise InputError(f"{path}: deep images are not supported")
         pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
-        if pixels is None:
-            raise InputError(f"{path}: corrupt or truncated image ({inp.geterror() or oiio.geterror()})")
+        if pixels is None or inp.has_error:  # a decoder may return pixels and still report damage
+            raise InputError(f"{path}: corrupt or truncated image ({_oiio_error(inp)}); refusing to use it")
         stored = str(spec.format)
         alpha = spec.alpha_channel
     finally:
         inp.close()
     image = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    if not np.all(np.isfinite(image)):
+        bad = int(image.size - np.count_nonzero(np.isfinite(image)))
+        raise InputError(f"{path}: {bad} values are not finite (NaN or inf): a corrupt file, or not linear radiance; "
+                         "refusing to use it")
     if srgb is None:
         _, srgb8, srgb16 = _READ_FORMATS[ext]
         if stored in ("float", "half", "double"):
@@ -440,6 +480,59 @@ def read_image(path, *, srgb: bool | None = None) -> np.ndarray:
         color = [c for c in range(image.shape[2]) if c != alpha]
         image[..., color] = srgb_decode(image[..., color])
     return np.ascontiguousarray(image)
+
+
+def read_mask(path) -> np.ndarray:
+    """Read a target mask painted in another program as ``(H, W) bool``.
+
+    The stored values are used as they are (no sRGB decoding: a 50 % grey is "painted"). A
+    pixel is in the mask when its luminance is non-zero — any grey or colour channel above 0 —
+    or, for a file with an alpha channel that is transparent somewhere, when its alpha is
+    non-zero (an alpha-only mask, whatever its colour channels hold).
+
+    Parameters
+    ----------
+    path : str or Path
+        A PNG, TIFF, EXR or JPEG file (not RAW).
+
+    Returns
+    -------
+    (H, W) bool
+
+    Raises
+    ------
+    InputError
+        Unreadable, unsupported or corrupt file (see :func:`read_image`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     grey = np.full((1, 3), 128, np.uint8); grey[0, 0] = 0
+    ...     _ = write_image(Path(d) / "m.png", grey)
+    ...     print(read_mask(Path(d) / "m.png").tolist())
+    [[False, True, True]]
+    """
+    path = _check_readable(path)
+    if _extension(path) in RAW_EXTENSIONS:
+        raise InputError(f"{path}: a mask must be a PNG, TIFF, EXR or JPEG image, not a camera RAW file")
+    pixels = read_image(path, srgb=False)
+    alpha = _alpha_index(path, pixels.shape[2])
+    if alpha is not None and (pixels[..., alpha] < 1).any():
+        return pixels[..., alpha] > 0
+    colour = [c for c in range(pixels.shape[2]) if c != alpha]
+    return (pixels[..., colour] > 0).any(axis=2)
+
+
+def _alpha_index(path: Path, channels: int) -> int | None:
+    inp = _oiio_open(path)
+    try:
+        index = inp.spec().alpha_channel
+    finally:
+        inp.close()
+    if 0 <= index < channels:
+        return index
+    return {2: 1, 4: 3}.get(channels)
 
 
 def raw_postprocess_options() -> dict[str, Any]:
@@ -835,19 +928,40 @@ def write_image(
     def _write(temp: Path) -> None:
         out = oiio.ImageOutput.create(fmt_name)
         if out is None:
-            raise OSError(f"no OpenImageIO writer for {fmt_name} ({oiio.geterror()})")
+            raise OSError(f"no OpenImageIO writer for {fmt_name} ({_oiio_error()})")
         if not out.open(str(temp), spec):
-            raise OSError(out.geterror() or oiio.geterror() or "cannot open for writing")
+            raise OSError(_oiio_error(out))
         ok = out.write_image(pixels)
-        err = out.geterror()
+        err = _oiio_error(out) if not ok else ""
         closed = out.close()
         if not ok or not closed:
-            raise OSError(err or out.geterror() or oiio.geterror() or "write failed")
+            raise OSError(err or _oiio_error(out))
+
+    def _verify(temp: Path) -> None:
+        _check_written(temp, pixels, dtype, metadata)
 
     try:
-        atomic_write(path, _write, mode=mode, exclusive=exclusive)
+        atomic_write(path, _write, mode=mode, exclusive=exclusive, verify=_verify)
     except FileExistsError:
         raise
     except OSError as exc:
         raise InputError(f"{path}: cannot write image ({exc}); the previous file, if any, is unchanged") from exc
     return path
+
+
+def _check_written(temp: Path, pixels: np.ndarray, dtype: str, metadata: dict | None) -> None:
+    """Read a written image back: OSError unless its pixels and metadata are exactly what was written."""
+    inp = oiio.ImageInput.open(str(temp), _input_config())
+    if inp is None:
+        raise OSError(errno.EIO, f"the image written does not read back ({_oiio_error()})")
+    try:
+        spec = inp.spec()
+        back = inp.read_image(0, 0, 0, spec.nchannels, dtype)
+        failed = back is None or inp.has_error
+    finally:
+        inp.close()
+    expected = pixels.astype(np.float16) if dtype == "half" else pixels
+    if failed or np.shape(back) != expected.shape or not np.array_equal(back, expected):
+        raise OSError(errno.EIO, "the image written does not read back as written (a full disk, or a failing one)")
+    if metadata and read_metadata(temp) != json.loads(json.dumps(metadata)):
+        raise OSError(errno.EIO, "the image written does not read back with its metadata")

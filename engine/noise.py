@@ -122,7 +122,8 @@ class CameraNoise:
         try:
             return cls(tuple(d["shot"]), tuple(d["read"]), float(d["exposure"]), float(d.get("floor", FLOAT32_FLOOR)))
         except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"camera noise is incomplete or malformed ({exc}): expected shot, read and exposure") from None
+            raise InputError(f"camera noise is incomplete or malformed ({exc}): expected shot, read and "
+                             "exposure") from None
 
     @classmethod
     def from_metadata(cls, metadata, exposure: float) -> CameraNoise | None:

@@ -61,16 +61,20 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
     out = np.empty(h * w * c, np.float32)
     tile = _TILE - _TILE % c
     weights = np.tile(kap.astype(np.float32), tile // c)
+    overflowed = []
 
     def run(start: int) -> None:
         stop = min(start + tile, out.size)
         wt = weights[: stop - start]
         acc = out[start:stop]
-        np.multiply(comps[k - 1, start:stop], wt, out=acc)
-        for i in range(k - 2, -1, -1):
-            acc += comps[i, start:stop]
-            acc *= wt
-        acc += unreached[start:stop]
+        with np.errstate(over="ignore", invalid="ignore"):  # checked below, while the tile is in cache
+            np.multiply(comps[k - 1, start:stop], wt, out=acc)
+            for i in range(k - 2, -1, -1):
+                acc += comps[i, start:stop]
+                acc *= wt
+            acc += unreached[start:stop]
+        if not np.isfinite(acc).all():
+            overflowed.append(start)
 
     starts = range(0, out.size, tile)
     if _THREADS > 1 and len(starts) > 1:
@@ -79,6 +83,11 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
     else:
         for s in starts:
             run(s)
+    if overflowed:
+        raise InputError(
+            f"recoloring with kappa {kap.tolist()} at order {k} gives values that are not finite: κ^{k} multiplies "
+            "the last interaction component beyond float32's range (or the decomposition holds non-finite "
+            "values); use a smaller kappa")
     return out.reshape(h, w, c)
 
 
@@ -163,7 +172,9 @@ def prepare_preview(decomposition: Decomposition, shape: tuple[int, int]) -> Pre
     Returns
     -------
     PreviewPack
-        ``recolor_preview(pack, κ)`` equals the area average of ``recolor(decomposition, κ)``.
+        ``recolor_preview(pack, κ)`` equals the area average of ``recolor(decomposition, κ)``;
+        with a covariance, ``recolor_variance(pack.decomposition, κ)`` is the mean of the
+        full-resolution pixels' predicted variance (exactly, in blocks wholly on or off the target).
     """
     if not isinstance(decomposition, Decomposition):
         raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
@@ -180,8 +191,9 @@ def prepare_preview(decomposition: Decomposition, shape: tuple[int, int]) -> Pre
     comps = area_average(decomposition.components, factor, axes=(1, 2))
     unreached = area_average(decomposition.unreached, factor)
     target = area_average(decomposition.target.astype(np.float32), factor) > 0.5
+    cov = None if decomposition.covariance is None else area_average(decomposition.covariance, factor, axes=(1, 2))
     small = Decomposition(
-        comps, unreached, target, decomposition.constraint, decomposition.unreached_light, None
+        comps, unreached, target, decomposition.constraint, decomposition.unreached_light, None, cov
     )
     return PreviewPack(small, (h / target.shape[0], w / target.shape[1]))
 

@@ -12,7 +12,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Camera", "Frame", "Projector", "RigLike"]
+__all__ = ["Camera", "Frame", "Projector", "RigLike", "fingerprint_differences", "fingerprint_of"]
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,11 @@ class Frame:
     metadata : dict
         Backend-specific facts (device name, raw file name, settle time, frames averaged,
         exposure brackets, ...), JSON-serialisable.
+    full_scale : float or None
+        Radiance at which this frame clips (the sensor's full well or white level, in the units
+        of ``image`` at this exposure and gain), when the backend knows it; ``math.inf`` for a
+        camera that does not clip at all (an ideal simulated sensor). Exposure control judges
+        the bright end against it instead of waiting for pixels to clip.
     """
 
     image: np.ndarray
@@ -44,6 +49,7 @@ class Frame:
     black_level: float = 0.0
     saturated: np.ndarray = None  # type: ignore[assignment]  # filled in __post_init__
     metadata: dict[str, Any] = field(default_factory=dict)
+    full_scale: float | None = None
 
     def __post_init__(self) -> None:
         if self.saturated is None:
@@ -63,6 +69,12 @@ class Camera(Protocol):
         ``ValueError`` or :class:`engine.errors.DeviceError` on assignment).
     gain : float
         Linear gain; settable likewise.
+    frame_identity : str or None, optional
+        Only for simulated cameras: set by :class:`engine.acquire.Recorder` before each frame
+        to the frame's identity (capture name, pattern, frame index), from which the camera
+        seeds that frame's noise (with its own seed) — never from the process, so no two
+        frames share their noise and a resumed run reproduces an uninterrupted one. A real
+        camera has no such attribute.
     """
 
     resolution: tuple[int, int]
@@ -106,6 +118,12 @@ class RigLike(Protocol):
         The name it was opened by (``"virtual:cornell"``).
     identity : str
         The physical set-up this rig stands for, which calibrations are checked against.
+    fingerprint : dict
+        Everything a calibration of this rig depends on, as named plain values: backend,
+        device model and serial, resolutions, projector pose or screen, ideal or realistic,
+        scene content for a simulated rig. A calibration made with another fingerprint is
+        refused (:func:`fingerprint_differences` says what differs). Optional: without it,
+        :func:`fingerprint_of` uses the identity and the resolutions.
     camera : Camera
     projector : Projector
     """
@@ -114,3 +132,39 @@ class RigLike(Protocol):
     identity: str
     camera: Camera
     projector: Projector
+
+
+def fingerprint_of(rig) -> dict:
+    """The rig's :attr:`RigLike.fingerprint`, or its identity and resolutions when it has none.
+
+    Examples
+    --------
+    >>> class Bare:
+    ...     identity = "opencv:0"
+    ...     class camera: resolution = (480, 640)
+    ...     class projector: resolution = (768, 1024)
+    >>> fingerprint_of(Bare())
+    {'rig': 'opencv:0', 'camera resolution': [480, 640], 'projector resolution': [768, 1024]}
+    """
+    given = getattr(rig, "fingerprint", None)
+    if isinstance(given, dict):
+        return dict(given)
+    return {"rig": str(rig.identity), "camera resolution": [int(v) for v in rig.camera.resolution],
+            "projector resolution": [int(v) for v in rig.projector.resolution]}
+
+
+def fingerprint_differences(made_with: dict, now: dict) -> list[str]:
+    """What differs between two rig fingerprints, one phrase per entry (empty: the same set-up).
+
+    Examples
+    --------
+    >>> fingerprint_differences({"projector pose": "coaxial", "ideal": True},
+    ...                         {"projector pose": "offset", "ideal": True})
+    ["projector pose 'coaxial' then, 'offset' now"]
+    """
+    out = []
+    for key in sorted(set(made_with) | set(now)):
+        then, current = made_with.get(key), now.get(key)
+        if then != current:
+            out.append(f"{key} {then!r} then, {current!r} now")
+    return out

@@ -355,7 +355,9 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
                 s = np.where(lit, unknowns[j, ..., ch] / denom, 0.0)
                 v = np.where(lit, np.minimum(cov[j, j, ..., ch] / denom**2, UNKNOWN), np.inf)
                 e_, v_, n_ = _smooth(s, v, lit, radii, window)
-                est.append(np.maximum(e_, 0.0))  # a share is never negative
+                # the ordering constraint on the smoothed shares: a share of the photograph's light
+                # lies in [0, 1] and none exceeds the share of one interaction fewer
+                est.append(np.clip(e_, 0.0, est[-1] if est else 1.0))
                 var.append(np.minimum(v_, UNKNOWN))
                 neff.append(n_)
             for i in range(n):
@@ -369,7 +371,8 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
                     else:
                         raw = np.clip(cov[i + 1, j + 1, ..., ch] / np.sqrt(np.maximum(
                             cov[i + 1, i + 1, ..., ch] * cov[j + 1, j + 1, ..., ch], 1e-300)), -1.0, 1.0)
-                        cij = raw * np.sqrt(var[i] * var[j] * np.minimum(neff[i], neff[j]) / np.maximum(neff[i], neff[j]))
+                        small, large = np.minimum(neff[i], neff[j]), np.maximum(neff[i], neff[j])
+                        cij = raw * np.sqrt(var[i] * var[j] * small / large)
                     p = packed_index(i, j, n)
                     share_cov[p, ..., ch] = np.where(region, cij, share_cov[p, ..., ch])
     return TrustLevel(shares, share_cov, photo_share, _target_sums(unknowns, cov, d.target))
@@ -480,7 +483,8 @@ def _coefficients(b: np.ndarray, rho: float, kappa: float, inside: bool) -> np.n
 def _candidate(beta, a, shares, cov, photo_cov, photo, photo_var):
     """Recolored values and their variance for one candidate (pixels as columns)."""
     val = a + beta @ shares
-    var = val**2 * photo_var + photo**2 * np.einsum("i,ijn,j->n", beta, cov, beta) + 2 * val * photo * (beta @ photo_cov)
+    var = (val**2 * photo_var + photo**2 * np.einsum("i,ijn,j->n", beta, cov, beta)
+           + 2 * val * photo * (beta @ photo_cov))
     return photo * val, np.maximum(var, 0)
 
 
@@ -505,6 +509,29 @@ def _local_mean(values: np.ndarray, region: np.ndarray, r: int) -> np.ndarray:
     return (_box(full, r) / np.maximum(_box(region, r), 1e-12))[region]
 
 
+def _correlation(s: np.ndarray, u: np.ndarray, ok: np.ndarray) -> float:
+    """How much a box average's variance exceeds the white-noise ``1 / Σ w``: ``Σ_lag ρ(lag)`` over the 3×3 lags.
+
+    The noise of re-emitted light is shared by the camera pixels that one projector pixel
+    lights (a projector coarser than the camera), so neighbouring shares' errors correlate.
+    Measured on the whitened residuals ``(s − s̄) √w`` (``s̄`` the radius-4 box mean), clipped
+    to [1, 9] (white noise: 1; errors shared by whole 3×3 blocks: 9).
+    """
+    if int(ok.sum()) < 16:
+        return 1.0
+    total = np.where(ok, _box(u, 4), 1.0)
+    z = np.where(ok, (s - _box(u * s, 4) / np.maximum(total, 1e-300)) * np.sqrt(u), 0.0)
+    energy = float(np.sum(z * z))
+    if energy <= 0:
+        return 1.0
+    lagged = 0.0
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = z[dy:, max(dx, 0):z.shape[1] + min(dx, 0)]
+        b = z[:z.shape[0] - dy, max(-dx, 0):z.shape[1] - max(dx, 0)]
+        lagged += float(np.sum(a * b))
+    return float(np.clip(1.0 + 2.0 * lagged / energy, 1.0, 9.0))
+
+
 def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
     """SURE-chosen inverse-variance box smoothing of one share over the pixels ``lit``.
 
@@ -515,6 +542,7 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
     vv = np.where(ok, v, 0.0)
     u = np.where(ok, 1.0 / np.where(ok, v, 1.0), 0.0)
     s0 = np.where(ok, s, 0.0)
+    spread = _correlation(s0, u, ok)
     weight = _box(u, window)  # precision in the window: noisy pixels count less
     weighed = weight > 1e-9 * max(float(weight.max()), 1e-300)  # (box sums leave rounding residue where empty)
     weight = np.where(weighed, weight, 1.0)
@@ -527,8 +555,8 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
             seen = total > 1e-9 * max(float(total.max()), 1e-300)
             total = np.where(seen, total, 1.0)
             est = np.where(seen, _box(u * s0, r) / total, 0.0)
-            var = np.where(seen, 1.0 / total, np.inf)
-            self_weight = u / total
+            var = np.where(seen, spread / total, np.inf)
+            self_weight = np.minimum(spread * u / total, 1.0)  # Cov(est, s) / Var(s), neighbours' share included
         sure = np.where(ok, (est - s0) ** 2 - vv * (1 - 2 * self_weight), 0.0)
         score = np.where(weighed, _box(u * sure, window) / weight, 0.0)
         mse = np.maximum(score, var)

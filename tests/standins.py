@@ -92,6 +92,12 @@ def _calls(sig: inspect.Signature):
         yield tuple(range(len(required))), {**needed_kw, p.name: 0}
 
 
+def _required(sig: inspect.Signature) -> int:
+    """How many positional arguments a call must give."""
+    positional = (_P.POSITIONAL_ONLY, _P.POSITIONAL_OR_KEYWORD)
+    return sum(1 for p in sig.parameters.values() if p.default is _P.empty and p.kind in positional)
+
+
 def _check_callable(label: str, standin, real) -> list[str]:
     problems = []
     theirs, ours = signature(real), signature(standin)
@@ -101,10 +107,11 @@ def _check_callable(label: str, standin, real) -> list[str]:
         except TypeError as exc:
             problems.append(f"{label}: the stand-in accepts {len(args)} positional and {sorted(kwargs)} keyword "
                             f"arguments, the real {theirs} does not ({exc})")
-    ours_required = sum(1 for p in ours.parameters.values() if p.default is _P.empty and p.kind in (_P.POSITIONAL_ONLY, _P.POSITIONAL_OR_KEYWORD))
-    theirs_required = sum(1 for p in theirs.parameters.values() if p.default is _P.empty and p.kind in (_P.POSITIONAL_ONLY, _P.POSITIONAL_OR_KEYWORD))
+    ours_required, theirs_required = _required(ours), _required(theirs)
     if theirs_required > ours_required and not any(p.kind == _P.VAR_POSITIONAL for p in ours.parameters.values()):
-        problems.append(f"{label}: the real {theirs} requires {theirs_required} arguments, the stand-in {ours} only {ours_required}")
+        problems.append(
+            f"{label}: the real {theirs} requires {theirs_required} arguments, the stand-in {ours} only {ours_required}"
+        )
     return problems
 
 

@@ -18,6 +18,53 @@ def kappa(text: str) -> np.ndarray:
     return np.broadcast_to(np.asarray(values, float), (3,)).copy()
 
 
+def _integer(text: str, what: str, lo: int, hi: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{what} must be an integer in {lo}..{hi}, got {text!r}") from None
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"{what} must be an integer in {lo}..{hi}, got {text!r}")
+    return value
+
+
+def frames(text: str) -> int:
+    """Frames averaged per capture: 1..:data:`engine.workflow.MAX_FRAMES`."""
+    from engine.workflow import MAX_FRAMES
+
+    return _integer(text, "frames", 1, MAX_FRAMES)
+
+
+def radius(text: str) -> int:
+    """A noise-reduction radius in pixels: 0 (off) .. :data:`engine.denoise.MAX_RADIUS`."""
+    from engine.denoise import MAX_RADIUS
+
+    return _integer(text, "the denoise radius", 0, MAX_RADIUS)
+
+
+def order(text: str) -> int:
+    """A decomposition order K: 1..:data:`engine.figurate.MAX_ORDER`."""
+    from engine.figurate import MAX_ORDER
+
+    return _integer(text, "order", 1, MAX_ORDER)
+
+
+def levels(text: str) -> int:
+    """Grey levels of the projector response ramp: 3..256 (an 8-bit projector has 256)."""
+    return _integer(text, "levels", 3, 256)
+
+
+def fraction(text: str) -> float:
+    """A relative error in (0, 1]: ``"0.05"`` (5 %)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not np.isfinite(value) or not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"threshold must be a relative error in (0, 1] (0.05 is 5 %), got {text!r}")
+    return value
+
+
 def resolution(text: str) -> tuple[int, int]:
     """Parse ``"256"`` or ``"240x320"`` (H x W)."""
     try:
@@ -51,3 +98,14 @@ def open_rig(args):
             if value not in (None, False):
                 options[key] = value
     return devices.open_rig(args.rig, **options)
+
+
+def report_session(session, command: str) -> None:
+    """Say on stderr what opening the session repaired: temporary files removed, unreadable captures set aside."""
+    import sys
+
+    for rel in session.removed:
+        print(f"albedit {command}: note: removed {rel}, left by a write that was killed", file=sys.stderr)
+    for old, new, why in session.quarantined:
+        print(f"albedit {command}: note: {old} could not be read ({why}); moved to {new}, it is taken again",
+              file=sys.stderr)

@@ -5,23 +5,29 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from app.cli._args import add_rig_options, open_rig
+from app.cli._args import add_rig_options, levels, open_rig, report_session
 from app.cli.main import ProgressBar
-from engine.workflow import open_session_for_rig, run_calibration
+from engine.workflow import calibration_problems, open_session_for_rig, run_calibration
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("session", type=Path, help="session folder (created if missing; an interrupted calibration resumes)")
+    parser.add_argument("session", type=Path,
+                        help="session folder (created if missing; an interrupted calibration resumes)")
     add_rig_options(parser)
-    parser.add_argument("--levels", type=int, default=17, help="grey levels of the response ramp (default %(default)s)")
-    parser.add_argument("--crosstalk", action="store_true", help="also measure projector-primary to camera-channel crosstalk")
+    parser.add_argument("--levels", type=levels, default=17,
+                        help="grey levels of the response ramp, 3..256 (default %(default)s)")
+    parser.add_argument("--crosstalk", action="store_true",
+                        help="also measure projector-primary to camera-channel crosstalk")
 
 
 def run(args) -> int:
     with open_rig(args) as rig:
         session = open_session_for_rig(args.session, rig)
+        report_session(session, "calibrate")
         cal = run_calibration(rig, session, levels=args.levels, crosstalk=args.crosstalk, progress=ProgressBar())
     print(f"calibrated {rig.name} into {args.session}", file=sys.stderr)
     print(cal.metadata.get("coverage", ""), file=sys.stderr)
     print(cal.metadata.get("exposure", ""), file=sys.stderr)
+    for what, fix in calibration_problems(cal):
+        print(f"problem: {what}\n  fix: {fix}", file=sys.stderr)
     return 0

@@ -2,20 +2,26 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import add_rig_options, kappa, open_rig
+from app.cli._args import add_rig_options, fraction, frames, kappa, open_rig, order, report_session
 from app.cli.main import ProgressBar
 from engine.acquire import Adaptive, CaptureSettings
-from engine.errors import InputError, SessionError
-from engine.imageio import read_image
+from engine.errors import InputError
+from engine.imageio import read_mask
 from engine.noise import packed_index
 from engine.session import Session
-from engine.workflow import estimated_report, load_calibration, open_session_for_rig, run_capture, save_calibration
+from engine.workflow import (
+    adopt_calibration,
+    check_targets,
+    estimated_report,
+    load_compatible_calibration,
+    open_session_for_rig,
+    run_capture,
+)
 
 
 def add_arguments(parser) -> None:
@@ -25,7 +31,8 @@ def add_arguments(parser) -> None:
     add_rig_options(parser)
     parser.add_argument(
         "--target", action="append", required=True, metavar="NAME[=MASK.png]",
-        help="target in cascade order (repeat for a cascade); NAME alone uses the rig's named target",
+        help="target in cascade order (repeat for a cascade); NAME alone uses the rig's named target; a MASK "
+             "image marks the target where its grey or colour is non-zero (or, with transparency, its alpha)",
     )
     parser.add_argument("--order", type=_order, default=4,
                         help="decomposition order K, or 'auto': capture until the linear prediction of the newest "
@@ -34,20 +41,16 @@ def add_arguments(parser) -> None:
                         help="kappa of each target but the last, in order (fixed before capture)")
     parser.add_argument("--adaptive", choices=("brute", "linear", "span"), default="brute",
                         help="predict captures instead of taking them (Sec. 5); default %(default)s")
-    parser.add_argument("--threshold", type=float, default=0.01, help="adaptive relative-error threshold (default 1%%)")
-    parser.add_argument("--frames", type=int, default=1, help="frames averaged per capture (default %(default)s)")
+    parser.add_argument("--threshold", type=fraction, default=0.01,
+                        help="adaptive relative-error threshold in (0, 1] (default 0.01, 1%%)")
+    parser.add_argument("--frames", type=frames, default=1, help="frames averaged per capture (default %(default)s)")
     parser.add_argument("--rgb", action="store_true", help="emit all channels at once instead of one primary at a time")
     parser.add_argument("--flood", type=float, default=None, metavar="LEVEL",
                         help="light the photograph with a projector flood of this level instead of black")
 
 
 def _order(text: str):
-    if text == "auto":
-        return text
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"order must be an integer 1..8 or 'auto', got {text!r}") from None
+    return text if text == "auto" else order(text)
 
 
 def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
@@ -55,7 +58,7 @@ def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
     for spec in args.target:
         name, _, path = spec.partition("=")
         if path:
-            mask = read_image(path)[..., 0] > 0.5
+            mask = read_mask(path)
         elif name in rig.targets:
             mask = rig.targets[name]
         else:
@@ -66,19 +69,16 @@ def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
 
 def run(args) -> int:
     with open_rig(args) as rig:
+        targets = _targets(args, rig)
+        check_targets(targets, tuple(rig.camera.resolution))  # before any folder is made or capture taken
         if args.calibration is not None:
-            calibration = load_calibration(Session.open(args.calibration))
-            calibration.check_compatible(rig.identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
+            calibration = load_compatible_calibration(args.calibration, rig)
             session = open_session_for_rig(args.session, rig)
-            if session.read_calibration()[0]:
-                if session.read_calibration()[0] != calibration.to_dict()[0]:
-                    raise SessionError(f"session {args.session} already has a different calibration; use a new session folder")
-            else:
-                save_calibration(session, calibration)
+            adopt_calibration(session, calibration)
         else:
             session = Session.open(args.session)
             session.recover_orphans()
-        targets = _targets(args, rig)
+        report_session(session, "capture")
         flood = None
         if args.flood is not None:
             hp, wp = rig.projector.resolution
@@ -104,7 +104,8 @@ def run(args) -> int:
         k, t = len(acq.observations), acq.target.mask
         rel = [float(np.sqrt(acq.covariance[packed_index(i, i, k)][t].mean())
                      / max(float(np.abs(acq.observations[i][t]).mean()), 1e-30)) for i in range(k)]
-        print("predicted σ on the target: " + ", ".join(f"observation {i} {r:.2%}" for i, r in enumerate(rel)), file=sys.stderr)
+        print("predicted σ on the target: " + ", ".join(f"observation {i} {r:.2%}" for i, r in enumerate(rel)),
+              file=sys.stderr)
     if line := estimated_report(session):
         print(line, file=sys.stderr)
     return 0

@@ -12,8 +12,12 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     import devices
 
+    print("Rigs (--rig NAME):")
     for entry in devices.available():
-        print(entry)
+        print(f"  {entry}")
+    print("Projectors (projector=NAME for a camera rig; the default is the second screen):")
+    for entry in devices.available_projectors():
+        print(f"  {entry}")
     if args.check:
         from devices.health import check_rig
 

@@ -1,16 +1,12 @@
-"""``albedit export``: write a session's saved edit (its free target's kappa) as an image."""
+"""``albedit export``: write a session's saved edit as an image, as the app's File ▸ Export does."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-import numpy as np
-
-from app.cli.recolor import add_denoise_option, decomposition_for, denoised, write_edit
+from app.cli.recolor import add_denoise_option, open_edit, set_noise_reduction, write
 from engine.errors import SessionError
-from engine.recolor import recolor
-from engine.session import Session
 
 
 def add_arguments(parser) -> None:
@@ -21,12 +17,11 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    session = Session.open(args.session)
-    edit = session.state.get("edit")
-    if not edit or "kappa" not in edit:
+    doc, session = open_edit(args.session, "export")
+    state = session.state
+    if "edit" not in state and "edits" not in state:
         raise SessionError(f"session {args.session} has no saved edit: use `albedit recolor` or save from the app")
-    d, plan = decomposition_for(session, None)
-    kappa = np.asarray(edit["kappa"], float)
-    write_edit(args.output, recolor(denoised(session, d, args.denoise), kappa), plan=plan, kappa_value=kappa, half=args.half)
+    set_noise_reduction(doc, session, args.denoise)
+    write(doc, args.output, half=args.half)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0

@@ -28,6 +28,9 @@ COMMANDS = {
 class ProgressBar:
     """A one-line progress bar on stderr, usable as an engine ``progress`` callback."""
 
+    #: a bar's line is on the terminal without its newline (an error must start a line of its own)
+    unfinished = False
+
     def __init__(self, stream=None, *, width: int = 28):
         self.stream = stream or sys.stderr
         self.width = width
@@ -44,9 +47,17 @@ class ProgressBar:
             self.stream.write(line)
             self.stream.flush()
             self._last = line
+            ProgressBar.unfinished = True
         if total > 0 and step >= total:
             self.stream.write("\n")
             self._last = ""
+            ProgressBar.unfinished = False
+
+
+def _end_progress_line() -> None:
+    if ProgressBar.unfinished:
+        sys.stderr.write("\n")
+        ProgressBar.unfinished = False
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -78,9 +89,11 @@ def run_command(argv: list[str] | None = None) -> int:
     try:
         return int(run(args) or 0)
     except KeyboardInterrupt:
+        _end_progress_line()
         print("albedit: interrupted; finished captures are kept in the session", file=sys.stderr)
         return 130
     except AlbeditError as exc:
+        _end_progress_line()
         print(f"albedit {args.command}: error: {exc}", file=sys.stderr)
         return 1
 

@@ -1,4 +1,4 @@
-"""``albedit recolor``: recolor a captured session's (last) target and write the image."""
+"""``albedit recolor``: recolor a captured session's free (last) target, write the image, save the edit."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import kappa
-from engine.denoise import denoise_components
+from app.cli._args import kappa, radius
+from app.model.document import Document
+from app.model.files import export_image, open_document, save_document
 from engine.errors import InputError, SessionError
-from engine.imageio import to_display, write_image
 from engine.recolor import recolor, recolor_variance
 from engine.session import Session
 from engine.workflow import load_decomposition
@@ -26,59 +26,62 @@ def add_arguments(parser) -> None:
 
 
 def add_denoise_option(parser) -> None:
-    """``--denoise RADIUS``: guided-filter the interaction components (0 = off)."""
-    parser.add_argument("--denoise", type=int, default=0, metavar="RADIUS",
-                        help="guided-filter radius for the interaction components, 0 = off (default %(default)s)")
+    """``--denoise RADIUS``: guided-filter the interaction components (0 = off; default: the saved edit's)."""
+    parser.add_argument("--denoise", type=radius, default=None, metavar="RADIUS",
+                        help="guided-filter radius for the interaction components, 0 = off "
+                             "(default: the saved edit's, else off)")
 
 
-def denoised(session: Session, d, radius: int):
-    """The decomposition with its interaction components denoised, guided by the photograph."""
-    if radius <= 0:
-        return d
-    photo = next((session.read_capture(r.name) for r in session.captures if r.meta.get("kind") == "photograph"), None)
-    if photo is None:
-        raise SessionError(f"session {session.path} has no photograph capture to guide the denoising")
-    return denoise_components(d, photo, radius=radius)
+def open_edit(path: Path, command: str) -> tuple[Document, Session]:
+    """The session's saved edit as a document with its decomposition (recomputed if the cache is gone)."""
+    if not path.is_dir():
+        raise SessionError(f"no session folder at {path}")
+    doc, session, warnings = open_document(path)
+    if doc.acquisition is None:
+        if warnings:
+            raise SessionError(f"session {path} cannot be recolored: {'; '.join(warnings)}")
+        raise SessionError(f"session {path} has no acquisition to recolor: run `albedit capture` first")
+    for line in warnings:
+        print(f"albedit {command}: warning: {line}", file=sys.stderr)
+    return doc, session
 
 
-def decomposition_for(session: Session, target: str | None):
-    """Load (or recompute through a replay rig) the session's decomposition."""
-    plan = session.state.get("plan") or {}
-    free = (plan.get("targets") or [None])[-1]
-    if target is not None and free is not None and target != free:
-        raise InputError(
-            f"target {target!r} is not the free target of this session (its plan recolors {plan.get('targets')}, "
-            f"and only the last, {free!r}, stays free)"
-        )
-    try:
-        return load_decomposition(session), plan
-    except SessionError:
-        if not plan:
-            raise
-        import devices  # no cached decomposition: recompute it offline from the captures
-
-        with devices.open_rig(f"replay:{session.path}") as rig:
-            return load_decomposition(session, rig=rig), plan
+def set_noise_reduction(doc: Document, session: Session, denoise: int | None) -> None:
+    """Use the noise-reduction radius asked for (None keeps the saved edit's)."""
+    acq = doc.acquisition
+    if denoise is None or denoise == acq.denoise:
+        return
+    filtered = None if denoise == 0 else load_decomposition(session, acq.key, denoise=denoise)
+    doc.set_noise_reduction(denoise, filtered)
 
 
-def write_edit(path: Path, image, *, plan: dict, kappa_value, half: bool = False) -> None:
-    """Write a recolored image with the edit recorded in its metadata."""
-    edit = {"targets": plan.get("targets"), "fixed_kappa": plan.get("fixed_kappa"), "kappa": list(map(float, kappa_value)), "order": plan.get("order")}
+def write(doc: Document, path: Path, *, half: bool) -> None:
+    """Export the document's recolored image (float EXR or TIFF, half EXR, or 8-bit sRGB PNG) with its edit."""
     suffix = path.suffix.lower()
     dtype = "half" if (half and suffix == ".exr") else ("uint8" if suffix == ".png" else "float")
-    write_image(path, image if dtype != "uint8" else to_display(image), dtype=dtype, metadata={"albedit.edit": edit})
+    export_image(doc, path, dtype=dtype)
 
 
 def run(args) -> int:
-    session = Session.open(args.session)
-    d, plan = decomposition_for(session, args.target)
-    out = recolor(denoised(session, d, args.denoise), args.kappa)
-    write_edit(args.output, out, plan=plan, kappa_value=args.kappa, half=args.half)
-    session.update(edit={"kappa": args.kappa.tolist()})
+    doc, session = open_edit(args.session, "recolor")
+    free = doc.target(doc.acquisition.cascade[-1])
+    if args.target is not None and args.target != free.name:
+        cascade = [doc.target(u).name for u in doc.acquisition.cascade]
+        raise InputError(f"target {args.target!r} is not the free target of this session (its cascade is {cascade}, "
+                         f"and only the last, {free.name!r}, stays free)")
+    doc.set_kappa(free.uid, args.kappa)
+    set_noise_reduction(doc, session, args.denoise)
+    write(doc, args.output, half=args.half)
     print(f"wrote {args.output}", file=sys.stderr)
-    if d.covariance is not None and args.denoise <= 0:  # the camera noise κ^(i+1) amplifies, on the target
+    d = doc.acquisition.decomposition
+    if d.covariance is not None:  # the camera noise κ^(i+1) amplifies, on the target
         sigma = float(np.sqrt(recolor_variance(d, args.kappa))[d.target].mean())
-        value = float(np.abs(out[d.target]).mean())
+        value = float(np.abs(recolor(d, args.kappa)[d.target]).mean())
         print(f"predicted σ on the target: {sigma:.4g} (mean), {sigma / max(value, 1e-30):.1%} of its mean value",
+              file=sys.stderr)
+    try:
+        save_document(doc, session)
+    except SessionError as exc:
+        print(f"albedit recolor: warning: the edit was not saved in the session ({exc}); {args.output} is complete",
               file=sys.stderr)
     return 0

@@ -1,7 +1,7 @@
 """The editing model: photograph, targets (masks, κ, cascade order), acquisition and undo.
 
 Qt-free. Widgets write the model; the model says what changed through psygnal signals
-(:class:`DocumentEvents`); every edit is a command on the undo :class:`~app.model.history.History`.
+(:class:`~app.model.target.DocumentEvents`); every edit is a command on the undo :class:`~app.model.history.History`.
 
 Vocabulary (DESIGN.md): a *target* is a set of camera pixels whose albedo is scaled by
 *kappa* (κ, one factor per channel). Targets are kept in *cascade* order (paper, Sec. 4):
@@ -13,102 +13,18 @@ the one :func:`engine.recolor.recolor` applies to the decomposition.
 from __future__ import annotations
 
 import uuid
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import replace
 
 import numpy as np
-from psygnal import Signal, SignalGroup
 
+from app.model import commands as cmd
 from app.model.history import History
+from app.model.target import KAPPA_MAX, KAPPA_MIN, PALETTE, BBox, DocumentEvents, Measurement, Target
 from engine.checks import check_float_image, check_kappa, check_mask
 from engine.errors import InputError
+from engine.workflow import check_targets
 
-#: Slider range of κ (log scale), as in the issue: 1/16 … 16.
-KAPPA_MIN = 1.0 / 16.0
-KAPPA_MAX = 16.0
-
-#: Overlay colours (RGB) handed to new targets in turn.
-PALETTE: tuple[tuple[int, int, int], ...] = (
-    (255, 70, 70),
-    (60, 150, 255),
-    (255, 205, 0),
-    (60, 215, 120),
-    (200, 90, 255),
-    (255, 135, 20),
-    (0, 215, 215),
-    (255, 90, 185),
-)
-
-BBox = tuple[int, int, int, int]  # (y0, y1, x0, x1), half-open, camera pixels
-
-
-@dataclass
-class Target:
-    """One target: a binary mask in camera pixels and its albedo scale.
-
-    Attributes
-    ----------
-    uid : int
-        Stable identity (names change, positions change).
-    name : str
-    mask : (H, W) bool
-        Owned by the document; edit it only through :class:`Document`.
-    kappa : (3,) float64
-        Per-channel albedo scale κ.
-    colour : (3,) int
-        Overlay colour, RGB 0..255.
-    """
-
-    uid: int
-    name: str
-    mask: np.ndarray
-    kappa: np.ndarray = field(default_factory=lambda: np.ones(3))
-    colour: tuple[int, int, int] = PALETTE[0]
-
-
-@dataclass(frozen=True)
-class Acquisition:
-    """What was measured: the cascade (target uids, first to last) and the decomposition.
-
-    ``decomposition`` is the last target's decomposition, computed from observations that
-    already carry the earlier targets' κ (paper, Algorithm 1); ``kappas`` are those κ.
-    ``masks`` are the acquired masks (copies); ``key`` names the measurement (session cache).
-    With noise reduction (``denoise`` > 0, :func:`engine.denoise.denoise_components` of that
-    radius) ``decomposition`` is the filtered one and ``measured`` the one measured.
-    """
-
-    cascade: tuple[int, ...]
-    kappas: tuple[np.ndarray, ...]
-    masks: tuple[np.ndarray, ...]
-    decomposition: Any
-    key: str
-    denoise: int = 0
-    measured: Any = None
-
-    @property
-    def raw(self):
-        """The decomposition as measured (before noise reduction)."""
-        return self.decomposition if self.measured is None else self.measured
-
-
-class DocumentEvents(SignalGroup):
-    """Signals of a :class:`Document` (all emitted on the thread that edits it)."""
-
-    #: targets added, removed, renamed or reordered
-    targets = Signal()
-    #: mask of target ``uid`` changed inside ``bbox`` (y0, y1, x0, x1)
-    mask = Signal(int, object)
-    #: κ of target ``uid`` changed
-    kappa = Signal(int, object)
-    #: the current (selected) target changed: uid or -1
-    current = Signal(int)
-    #: acquisition / decomposition replaced or discarded
-    acquisition = Signal()
-    #: a message for the user about a harmless but notable edit (e.g. unreachable pixels)
-    warning = Signal(str)
-    #: saved / modified state flipped
-    dirty = Signal(bool)
-
+__all__ = ["BBox", "Document", "KAPPA_MAX", "KAPPA_MIN", "Measurement", "PALETTE", "Target"]
 
 class Document:
     """Everything the user edits, Qt-free.
@@ -150,10 +66,10 @@ class Document:
         self.truth = truth
         self.targets: list[Target] = []
         self.current: int = -1
-        self.acquisition: Acquisition | None = None
+        self.acquisition: Measurement | None = None
         self._next_uid = 1
         self._gesture: tuple[int, np.ndarray] | None = None
-        self._stroke: _Stroke | None = None
+        self._stroke: cmd.Stroke | None = None
         self._dirty_outside_history = False
         self._last_dirty = False
 
@@ -231,22 +147,11 @@ class Document:
         Parameters
         ----------
         uids : sequence of int, optional
-            The cascade to acquire, first to last; default every target in order.
+            The cascade to acquire, first to last; default the included targets in order.
         """
-        uids = [t.uid for t in self.targets] if uids is None else list(uids)
-        if not uids:
-            raise InputError("no target to acquire: add a target and paint it first")
-        for u in uids:
-            t = self.target(u)
-            if not t.mask.any():
-                raise InputError(f"target {t.name!r} is empty: paint it before acquiring")
-        conflicts = {n: c for n, c in self.unreachable_conflicts().items() if self.by_name(n).uid in uids}
-        if conflicts:
-            listed = ", ".join(f"{n!r}: {c} px" for n, c in conflicts.items())
-            raise InputError(
-                f"targets cover pixels the projector cannot reach ({listed}); their light cannot be "
-                "re-emitted. Erase them (shown hatched) before acquiring."
-            )
+        uids = [t.uid for t in self.acquisition_targets()] if uids is None else list(uids)
+        check_targets([(self.target(u).name, self.target(u).mask) for u in uids], self.shape,
+                      unreachable=self.unreachable)
 
     # ----------------------------------------------------------------- target list
     def add_target(self, name: str | None = None, mask=None, *, kappa=1.0, index: int | None = None) -> Target:
@@ -257,14 +162,14 @@ class Document:
         t = Target(self._next_uid, name, mask, check_kappa(kappa, 3), colour)
         self._next_uid += 1
         index = len(self.targets) if index is None else int(index)
-        self.history.push(_AddTarget(self, t, index))
+        self.history.push(cmd.AddTarget(self, t, index))
         return t
 
     def remove_target(self, uid: int) -> None:
         """Delete a target (undoable). Acquired targets can't be removed."""
         if lock := self.mask_lock(uid):
             raise InputError(f"cannot delete: {lock}")
-        self.history.push(_RemoveTarget(self, self.target(uid), self.index(uid)))
+        self.history.push(cmd.RemoveTarget(self, self.target(uid), self.index(uid)))
 
     def rename_target(self, uid: int, name: str) -> None:
         """Rename (undoable). Names are unique and non-empty."""
@@ -276,7 +181,7 @@ class Document:
             raise InputError("target name must not be empty")
         if any(o.name == name for o in self.targets if o.uid != uid):
             raise InputError(f"target name {name!r} is already used; choose another")
-        self.history.push(_Rename(self, uid, t.name, name))
+        self.history.push(cmd.Rename(self, uid, t.name, name))
 
     def move_target(self, uid: int, index: int) -> None:
         """Move target ``uid`` to cascade position ``index`` (undoable)."""
@@ -288,7 +193,16 @@ class Document:
             return
         if self.acquisition is not None:
             raise InputError("the cascade order was fixed by the acquisition; discard it to reorder targets")
-        self.history.push(_Move(self, uid, old, index))
+        self.history.push(cmd.Move(self, uid, old, index))
+
+    def set_included(self, uid: int, included: bool) -> None:
+        """Include target ``uid`` in the next acquisition, or leave it out (undoable)."""
+        if bool(included) != self.target(uid).included:
+            self.history.push(cmd.Include(self, uid, included))
+
+    def acquisition_targets(self) -> list[Target]:
+        """The targets the next acquisition measures: the included ones, in cascade order."""
+        return [t for t in self.targets if t.included]
 
     def set_current(self, uid: int) -> None:
         """Select the target that tools paint into (not an edit: no undo step)."""
@@ -308,9 +222,9 @@ class Document:
         if np.array_equal(k, t.kappa):
             return
         if self._gesture is not None and self._gesture[0] == uid:
-            self._apply_kappa(uid, k)
+            self._mutate_kappa(uid, k)
         else:
-            self.history.push(_Kappa(self, uid, t.kappa.copy(), k))
+            self.history.push(cmd.Kappa(self, uid, t.kappa.copy(), k))
 
     def begin_kappa_gesture(self, uid: int) -> None:
         """A slider drag starts: κ changes until :meth:`end_kappa_gesture` make one undo step."""
@@ -324,7 +238,7 @@ class Document:
         uid, old = self._gesture
         self._gesture = None
         if self._has(uid) and not np.array_equal(old, self.target(uid).kappa):
-            self.history.push(_Kappa(self, uid, old, self.target(uid).kappa.copy()), applied=True)
+            self.history.push(cmd.Kappa(self, uid, old, self.target(uid).kappa.copy()), applied=True)
 
     def reset_kappa(self, uid: int) -> None:
         """κ back to 1 (undoable)."""
@@ -336,7 +250,7 @@ class Document:
         if lock := self.mask_lock(uid):
             raise InputError(lock)
         self.end_stroke()
-        self._stroke = _Stroke(uid)
+        self._stroke = cmd.Stroke(uid)
 
     def paint(self, uid: int, bbox: BBox, stamp: np.ndarray, value: bool) -> int:
         """Set ``mask[bbox][stamp] = value``; returns the number of pixels that changed.
@@ -362,7 +276,7 @@ class Document:
                 raise InputError(lock)
             after = region.copy()
             after[change] = value
-            self.history.push(_MaskEdit(self, uid, bbox, region.copy(), after, "Paint"))
+            self.history.push(cmd.MaskEdit(self, uid, bbox, region.copy(), after, "Paint"))
         else:
             self._stroke.remember(t.mask, bbox)
             region[change] = value
@@ -379,7 +293,7 @@ class Document:
         after = self.target(stroke.uid).mask[y0:y1, x0:x1].copy()
         if np.array_equal(after, stroke.before):
             return
-        self.history.push(_MaskEdit(self, stroke.uid, stroke.bbox, stroke.before, after, "Paint"), applied=True)
+        self.history.push(cmd.MaskEdit(self, stroke.uid, stroke.bbox, stroke.before, after, "Paint"), applied=True)
 
     def set_mask_region(self, uid: int, bbox: BBox, values: np.ndarray, text: str = "Edit mask") -> None:
         """Replace ``mask[bbox]`` with ``values`` as one undo step (polygon, fill, clear)."""
@@ -393,7 +307,7 @@ class Document:
             raise InputError(f"values must have the bbox's shape {before.shape}, got {values.shape}")
         if np.array_equal(before, values):
             return
-        self.history.push(_MaskEdit(self, uid, bbox, before, values.copy(), text))
+        self.history.push(cmd.MaskEdit(self, uid, bbox, before, values.copy(), text))
         self._warn_unreachable(t, bbox, values & ~before, True)
 
     def clear_mask(self, uid: int) -> None:
@@ -408,7 +322,7 @@ class Document:
         if lock := self.mask_lock(uid):
             raise InputError(lock)
         self.target(uid)
-        self.history.push(_Invert(self, uid))
+        self.history.push(cmd.Invert(self, uid))
         t = self.target(uid)
         self._warn_unreachable(t, (0, self.shape[0], 0, self.shape[1]), t.mask, True)
 
@@ -445,7 +359,7 @@ class Document:
             )
         self.end_stroke()
         self.end_kappa_gesture()
-        self.acquisition = Acquisition(
+        self.acquisition = Measurement(
             cascade,
             tuple(self.target(u).kappa.copy() for u in cascade),
             tuple(self.target(u).mask.copy() for u in cascade),
@@ -461,8 +375,7 @@ class Document:
     def set_noise_reduction(self, radius: int, decomposition=None) -> None:
         """Use ``decomposition`` — the measured one noise-reduced with ``radius`` — for recoloring.
 
-        Not undoable (a computed result, like the acquisition itself); ``radius`` 0 goes back
-        to the measured decomposition and needs none.
+        One undo step; ``radius`` 0 goes back to the measured decomposition and needs none.
 
         Raises
         ------
@@ -483,20 +396,14 @@ class Document:
         elif decomposition.components.shape != acq.raw.components.shape or not np.array_equal(
                 decomposition.target, acq.raw.target):
             raise InputError("the filtered decomposition does not match the measured one (shape or target)")
-        self.acquisition = replace(acq, decomposition=decomposition, denoise=radius,
-                                   measured=None if radius == 0 else acq.raw)
-        self._dirty_outside_history = True
-        self.events.acquisition.emit()
-        self._emit_dirty()
+        new = replace(acq, decomposition=decomposition, denoise=radius, measured=None if radius == 0 else acq.raw)
+        text = f"Noise reduction {radius} px" if radius else "Noise reduction off"
+        self.history.push(cmd.SetMeasurement(self, acq, new, text))
 
     def discard_acquisition(self) -> None:
-        """Forget the measurement: every κ and mask becomes editable again."""
-        if self.acquisition is None:
-            return
-        self.acquisition = None
-        self._dirty_outside_history = True
-        self.events.acquisition.emit()
-        self._emit_dirty()
+        """Forget the measurement (one undo step): every κ and mask becomes editable again."""
+        if self.acquisition is not None:
+            self.history.push(cmd.SetMeasurement(self, self.acquisition, None, "Discard acquisition"))
 
     def recolor_kappa(self) -> np.ndarray:
         """κ the decomposition is recolored with: the last cascade target's (ones without one)."""
@@ -538,9 +445,42 @@ class Document:
             return None
         return y0, y1, x0, x1
 
-    def _apply_kappa(self, uid: int, kappa: np.ndarray) -> None:
+    # The commands (app.model.commands) change the document through these, which keep it
+    # consistent before any signal goes out.
+    def _mutate_kappa(self, uid: int, kappa: np.ndarray) -> None:
         self.target(uid).kappa = np.array(kappa, dtype=np.float64)
         self.events.kappa.emit(uid, self.target(uid).kappa.copy())
+
+    def _mutate_target(self, uid: int, **fields) -> None:
+        t = self.target(uid)
+        for k, v in fields.items():
+            setattr(t, k, v)
+        self.events.targets.emit()
+
+    def _mutate_insert(self, t: Target, index: int) -> None:
+        """Put ``t`` back at ``index`` and make it current."""
+        self.targets.insert(index, t)
+        self.current = t.uid
+        self.events.targets.emit()
+        self.events.current.emit(t.uid)
+
+    def _mutate_remove(self, t: Target, fallback: int | None) -> None:
+        """Take ``t`` out; if it was current, ``fallback`` (or its neighbour) becomes current first."""
+        index = self.targets.index(t)
+        self.targets.remove(t)
+        changed = self.current == t.uid
+        if changed:
+            if fallback is not None and self._has(fallback):
+                self.current = fallback
+            else:
+                self.current = self.targets[min(index, len(self.targets) - 1)].uid if self.targets else -1
+        self.events.targets.emit()
+        if changed:
+            self.events.current.emit(self.current)
+
+    def _mutate_measurement(self, measurement: Measurement | None) -> None:
+        self.acquisition = measurement
+        self.events.acquisition.emit()
 
     def _warn_unreachable(self, t: Target, bbox: BBox, added: np.ndarray, value: bool) -> None:
         if self.unreachable is None or not value:
@@ -569,133 +509,3 @@ def _nonzero_bbox(mask: np.ndarray) -> BBox | None:
         return None
     cols = np.flatnonzero(mask.any(axis=0))
     return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
-
-
-class _Stroke:
-    """Bounding box and old values of everything one drag touched (napari's paint atom)."""
-
-    def __init__(self, uid: int):
-        self.uid = uid
-        self.bbox: BBox | None = None
-        self.before: np.ndarray | None = None
-
-    def remember(self, mask: np.ndarray, bbox: BBox) -> None:
-        """Grow the saved region to cover ``bbox`` before ``mask[bbox]`` is modified."""
-        if self.bbox is None:
-            y0, y1, x0, x1 = bbox
-            self.bbox, self.before = bbox, mask[y0:y1, x0:x1].copy()
-            return
-        (a0, a1, b0, b1), (c0, c1, d0, d1) = self.bbox, bbox
-        new = (min(a0, c0), max(a1, c1), min(b0, d0), max(b1, d1))
-        if new == self.bbox:
-            return
-        y0, y1, x0, x1 = new
-        # Outside the old box nothing was touched yet, so the mask still holds the old values.
-        before = mask[y0:y1, x0:x1].copy()
-        before[a0 - y0 : a1 - y0, b0 - x0 : b1 - x0] = self.before
-        self.bbox, self.before = new, before
-
-
-class _MaskEdit:
-    def __init__(self, doc: Document, uid: int, bbox: BBox, before, after, verb: str):
-        self.doc, self.uid, self.bbox, self.before, self.after = doc, uid, bbox, before, after
-        self.text = f"{verb} {doc.target(uid).name!r}"
-
-    def _set(self, values) -> None:
-        y0, y1, x0, x1 = self.bbox
-        self.doc.target(self.uid).mask[y0:y1, x0:x1] = values
-        self.doc.events.mask.emit(self.uid, self.bbox)
-
-    def redo(self) -> None:
-        self._set(self.after)
-
-    def undo(self) -> None:
-        self._set(self.before)
-
-
-class _Invert:
-    def __init__(self, doc: Document, uid: int):
-        self.doc, self.uid = doc, uid
-        self.text = f"Invert {doc.target(uid).name!r}"
-
-    def redo(self) -> None:
-        t = self.doc.target(self.uid)
-        np.logical_not(t.mask, out=t.mask)
-        self.doc.events.mask.emit(self.uid, (0, self.doc.shape[0], 0, self.doc.shape[1]))
-
-    undo = redo
-
-
-class _Kappa:
-    def __init__(self, doc: Document, uid: int, old, new):
-        self.doc, self.uid, self.old, self.new = doc, uid, np.array(old), np.array(new)
-        self.text = f"Albedo {doc.target(uid).name!r}"
-
-    def redo(self) -> None:
-        self.doc._apply_kappa(self.uid, self.new)
-
-    def undo(self) -> None:
-        self.doc._apply_kappa(self.uid, self.old)
-
-
-class _AddTarget:
-    def __init__(self, doc: Document, target: Target, index: int):
-        self.doc, self.t, self.i = doc, target, index
-        self.previous = doc.current
-        self.text = f"Add target {target.name!r}"
-
-    def redo(self) -> None:
-        self.doc.targets.insert(self.i, self.t)
-        self.doc.events.targets.emit()
-        self.doc.set_current(self.t.uid)
-
-    def undo(self) -> None:
-        self.doc.targets.remove(self.t)
-        self.doc.events.targets.emit()
-        self.doc.set_current(self.previous if self.doc._has(self.previous) else -1)
-
-
-class _RemoveTarget(_AddTarget):
-    def __init__(self, doc: Document, target: Target, index: int):
-        super().__init__(doc, target, index)
-        self.text = f"Delete target {target.name!r}"
-
-    def redo(self) -> None:
-        _AddTarget.undo(self)
-        if self.doc.current == -1 and self.doc.targets:
-            self.doc.set_current(self.doc.targets[min(self.i, len(self.doc.targets) - 1)].uid)
-
-    def undo(self) -> None:
-        _AddTarget.redo(self)
-
-
-class _Rename:
-    def __init__(self, doc: Document, uid: int, old: str, new: str):
-        self.doc, self.uid, self.old, self.new = doc, uid, old, new
-        self.text = f"Rename {old!r} to {new!r}"
-
-    def redo(self) -> None:
-        self.doc.target(self.uid).name = self.new
-        self.doc.events.targets.emit()
-
-    def undo(self) -> None:
-        self.doc.target(self.uid).name = self.old
-        self.doc.events.targets.emit()
-
-
-class _Move:
-    def __init__(self, doc: Document, uid: int, old: int, new: int):
-        self.doc, self.uid, self.old, self.new = doc, uid, old, new
-        self.text = f"Move {doc.target(uid).name!r}"
-
-    def _to(self, i: int) -> None:
-        t = self.doc.target(self.uid)
-        self.doc.targets.remove(t)
-        self.doc.targets.insert(i, t)
-        self.doc.events.targets.emit()
-
-    def redo(self) -> None:
-        self._to(self.new)
-
-    def undo(self) -> None:
-        self._to(self.old)

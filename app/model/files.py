@@ -1,44 +1,60 @@
 """Documents on disk: open and save sessions with their edits, export images. Qt-free.
 
 A document saved by the app lives in a session folder (:mod:`engine.session`). Its edit is
-kept in the session's JSON state under ``"edits"``::
+the engine's saved edit (:mod:`engine.session.edit`, read by :func:`engine.workflow.saved_edit`,
+which also reads what older versions wrote): the targets with their display names, masks, κ
+and overlay colours, the acquired cascade, its decomposition's cache key and its noise reduction.
 
-    {"version": 1, "photograph": "<capture name>",
-     "targets": [{"name": ..., "mask": "<mask name>", "kappa": [r, g, b], "colour": [r, g, b]}, ...],
-     "current": "<target name>",
-     "acquisition": {"key": ..., "cascade": [names], "kappas": [[...]], "masks": [mask names],
-                     "constraint": ..., "unreached_light": ..., "denoise": radius}}
+Masks are stored under names derived from each target's name and pixels
+(:func:`engine.session.edit.mask_name`) and the decomposition in the session cache under the
+acquisition's key (its noise-reduced version, if any, under
+:func:`engine.workflow.denoised_key`), all *before* the state is rewritten, so a save that
+fails half way leaves the previous save intact ("nothing lost").
 
-Masks are stored under content-addressed names (``edit-<sha>``) and the decomposition in the
-session cache under the acquisition's key (its noise-reduced version, if any, under
-``<key>-denoise<radius>``), all *before* the state is rewritten, so a save
-that fails half way leaves the previous save intact ("nothing lost").
-
-Which capture is the photograph: ``edits.photograph``, else ``state["photograph"]``, else a
-capture named ``"photograph"``, else the last capture whose metadata says ``kind:
-"photograph"`` (what ``engine.workflow.run_capture`` writes), else the first capture. A mask
-named ``"unreachable"`` marks camera pixels the projector cannot light; without one, they are
-taken from the session's calibration (:func:`unreachable_pixels`).
+Which capture is the photograph: :func:`engine.workflow.photograph_name`. A mask named
+``"unreachable"`` marks camera pixels the projector cannot light; without one, they are taken
+from the session's calibration (:func:`unreachable_pixels`).
 """
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from app.model.document import Document
 from engine import imageio
-from engine.decompose import Decomposition
 from engine.errors import InputError, SessionError
 from engine.progress import checkpoint, report
 from engine.recolor import recolor
 from engine.session import Session
+from engine.session.edit import METADATA_KEY, Edit, EditAcquisition, EditTarget, export_metadata, mask_digest, mask_name
+from engine.workflow import (
+    cached_decomposition,
+    denoised_key,
+    load_calibration,
+    load_decomposition,
+    photograph_name,
+    save_edit,
+    saved_edit,
+)
 
-EDITS_VERSION = 1
 PHOTOGRAPH = "photograph"
 UNREACHABLE = "unreachable"
+
+class NeedsClipping(InputError):
+    """An integer export would have to clip values outside [0, 1]; exporting again with ``clip=True`` allows it.
+
+    Attributes
+    ----------
+    values : int
+        How many values fall outside [0, 1].
+    """
+
+    def __init__(self, message: str, *, values: int) -> None:
+        super().__init__(message)
+        self.values = values
+
 
 #: Export choices: extension → allowed dtypes (first is the default).
 EXPORT_FORMATS = {
@@ -78,8 +94,12 @@ def open_document(path, *, history=None) -> tuple[Document, Session | None, list
         doc, warnings = _document_from_session(session, history=history)
         return doc, session, warnings
     image = imageio.read_image(path)
-    if image.ndim != 3 or image.shape[2] < 3:
-        raise InputError(f"{path}: an RGB image is needed, got shape {image.shape}")
+    if image.ndim == 2:
+        image = image[..., None]
+    if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
+        raise InputError(f"{path}: a grey or RGB image is needed, got shape {image.shape}")
+    if image.shape[2] < 3:  # grey (and alpha): the same light in every channel
+        image = np.repeat(image[..., :1], 3, axis=2)
     doc = Document(np.ascontiguousarray(image[..., :3]), history=history, source=str(path))
     return doc, None, []
 
@@ -97,111 +117,56 @@ def unreachable_pixels(calibration) -> np.ndarray:
 
 
 def _calibrated_unreachable(session: Session) -> np.ndarray | None:
-    from engine.workflow import load_calibration
-
     try:
         return unreachable_pixels(load_calibration(session))
-    except (SessionError, InputError, KeyError, ValueError):
+    except SessionError:
         return None  # no (usable) calibration: nothing is known to be unreachable
 
 
-def _photograph_name(session: Session, edits: dict) -> str:
-    records = session.captures
-    names = [c.name for c in records]
-    if not names:
-        raise SessionError(f"session {session.path} has no capture: there is no photograph to edit")
-    for candidate in (edits.get("photograph"), session.state.get("photograph"), PHOTOGRAPH):
-        if isinstance(candidate, str) and candidate in names:
-            return candidate
-    kinds = [c.name for c in records if isinstance(c.meta, dict) and c.meta.get("kind") == "photograph"]
-    return kinds[-1] if kinds else names[0]
-
-
 def _document_from_session(session: Session, *, history=None) -> tuple[Document, list[str]]:
-    state = session.state
-    edits = state.get("edits") if isinstance(state.get("edits"), dict) else {}
-    photo = session.read_capture(_photograph_name(session, edits))
+    edit = saved_edit(session)
+    photo = session.read_capture(photograph_name(session, edit))
     unreachable = session.read_mask(UNREACHABLE) if UNREACHABLE in session.masks else _calibrated_unreachable(session)
-    doc = Document(photo, unreachable=unreachable, history=history, source=session.rig_name)
+    source = session.metadata.get("source")  # a session made from a document records where its photograph came from
+    doc = Document(photo, unreachable=unreachable, history=history,
+                   source=source if isinstance(source, str) else session.rig_name)
     warnings: list[str] = []
-    version = edits.get("version", EDITS_VERSION)
-    if version > EDITS_VERSION:
-        raise SessionError(f"{session.path}: edits version {version} is newer than this app ({EDITS_VERSION})")
-    for entry in edits.get("targets", []):
+    for t in () if edit is None else edit.targets:
         try:
-            mask = session.read_mask(entry["mask"])
-            t = doc.add_target(str(entry["name"]), mask, kappa=entry.get("kappa", 1.0))
-            if "colour" in entry:
-                t.colour = tuple(int(c) for c in entry["colour"])[:3]
-        except (KeyError, TypeError, InputError, SessionError) as exc:
-            warnings.append(f"target {entry.get('name', '?')!r} could not be restored: {exc}")
-    acq = edits.get("acquisition")
-    plan = state.get("plan")
-    if isinstance(acq, dict):
+            target = doc.add_target(t.name, session.read_mask(t.mask), kappa=t.kappa)
+            if t.colour is not None:
+                target.colour = t.colour
+        except (InputError, SessionError) as exc:
+            warnings.append(f"target {t.name!r} could not be restored: {exc}")
+    if edit is not None and edit.acquisition is not None:
         try:
-            warnings += _restore_acquisition(doc, session, acq)
-        except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
+            warnings += _restore_acquisition(doc, session, edit)
+        except (InputError, SessionError) as exc:
             warnings.append(f"the acquisition could not be restored ({exc}); acquire again to recolor")
-    elif not edits and isinstance(plan, dict) and state.get("status") == "captured":
-        try:
-            _restore_plan(doc, session, plan)
-        except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
-            warnings.append(f"the captured plan could not be restored ({exc})")
-    current = edits.get("current")
     for t in doc.targets:
-        if t.name == current:
+        if edit is not None and t.name == edit.current:
             doc.set_current(t.uid)
     doc.history.clear()
     doc.mark_saved()
     return doc, warnings
 
 
-def _decomposition_from_cache(session: Session, key: str, acq: dict | None = None) -> Decomposition:
-    arrays = session.cache_get(key)
-    if arrays is None:
-        raise SessionError(f"its decomposition {key!r} is missing from the session cache")
-    if "flags" in arrays:  # the layout engine.workflow.cache_decomposition writes
-        constraint = bytes(arrays["constraint"]).decode().strip()
-        unreached_light = bool(arrays["flags"][0])
-    else:
-        constraint = str((acq or {}).get("constraint", "ordered"))
-        unreached_light = bool((acq or {}).get("unreached_light", True))
-    return Decomposition(arrays["components"], arrays["unreached"], arrays["target"].astype(bool),
-                         constraint, unreached_light, arrays.get("residual"))
-
-
-def _restore_acquisition(doc: Document, session: Session, acq: dict) -> list[str]:
+def _restore_acquisition(doc: Document, session: Session, edit: Edit) -> list[str]:
     """Set the saved acquisition (and its noise reduction) on ``doc``; returns warnings."""
-    key = str(acq["key"])
-    d = _decomposition_from_cache(session, key, acq)
-    cascade = [doc.by_name(n).uid for n in acq["cascade"]]
-    doc.set_acquisition(cascade, d, key=key)
-    radius = int(acq.get("denoise", 0))
-    if radius <= 0:
-        return []
+    acq = edit.acquisition
+    notes: list[str] = []
+    d = load_decomposition(session, acq.decomposition, notes=notes)
+    doc.set_acquisition([doc.by_name(n).uid for n in acq.cascade], d, key=acq.decomposition)
+    if acq.denoise <= 0:
+        return notes
+    filtered = cached_decomposition(session, denoised_key(acq.decomposition, acq.denoise), notes)
     try:
-        doc.set_noise_reduction(radius, _decomposition_from_cache(session, _denoised_key(key, radius), acq))
-    except (KeyError, TypeError, ValueError, InputError, SessionError) as exc:
-        return [f"noise reduction (radius {radius}) could not be restored ({exc}); apply it again"]
-    return []
-
-
-def _denoised_key(key: str, radius: int) -> str:
-    return f"{key}-denoise{radius}"
-
-
-def _restore_plan(doc: Document, session: Session, plan: dict) -> None:
-    """A session captured by ``albedit capture`` (engine.workflow): its targets, fixed κ, decomposition."""
-    from engine.workflow import plan_key
-
-    names = [str(n) for n in plan["targets"]]
-    fixed = list(plan.get("fixed_kappa", []))
-    for i, name in enumerate(names):
-        kappa = fixed[i] if i < len(fixed) else 1.0
-        doc.add_target(name, session.read_mask(name), kappa=kappa)
-    key = plan_key(session)
-    d = _decomposition_from_cache(session, key)
-    doc.set_acquisition([doc.by_name(n).uid for n in names], d, key=key)
+        if filtered is None:
+            raise SessionError("its filtered decomposition is missing from the session cache")
+        doc.set_noise_reduction(acq.denoise, filtered)
+    except (InputError, SessionError) as exc:
+        notes.append(f"noise reduction (radius {acq.denoise}) could not be restored ({exc}); apply it again")
+    return notes
 
 
 # ----------------------------------------------------------------------------- saving
@@ -235,6 +200,27 @@ def create_session(path, document: Document, *, rig_name: str | None = None,
     return session
 
 
+def document_edit(document: Document, *, photograph: str | None = None) -> Edit:
+    """The document's edit in the engine's schema (:class:`engine.session.edit.Edit`).
+
+    Raises
+    ------
+    InputError
+        A target name no user could type (line breaks, tabs).
+    """
+    acq = document.acquisition
+    return Edit(
+        targets=tuple(EditTarget(t.name, mask_name(t.name, mask_digest(t.mask)), tuple(float(k) for k in t.kappa),
+                                 tuple(int(c) for c in t.colour)) for t in document.targets),
+        acquisition=None if acq is None else EditAcquisition(
+            tuple(document.target(u).name for u in acq.cascade),
+            tuple(tuple(float(k) for k in kap) for kap in acq.kappas),
+            acq.key, int(acq.denoise)),
+        current=document.target(document.current).name if document.current != -1 else None,
+        photograph=photograph,
+    )
+
+
 def save_document(document: Document, session: Session, *, mark_saved: bool = True) -> None:
     """Write the edit (targets, masks, κ, acquisition) into ``session`` and mark the document saved.
 
@@ -248,45 +234,29 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
     ------
     SessionError
         A write failed (the document stays marked unsaved).
+    InputError
+        A target name no user could type (line breaks, tabs).
     """
     if tuple(session.camera_resolution) != tuple(document.shape):
         raise SessionError(f"session {session.path} is {session.camera_resolution}, the document {document.shape}")
+    edit = document_edit(document, photograph=photograph_name(session, saved_edit(session)))
     existing = set(session.masks)
-    targets = []
-    for t in document.targets:
-        name = _mask_name(t.mask)
-        if name not in existing:
-            session.write_mask(name, t.mask)
-            existing.add(name)
-        targets.append({"name": t.name, "mask": name, "kappa": [float(k) for k in t.kappa],
-                        "colour": [int(c) for c in t.colour]})
-    edits = {
-        "version": EDITS_VERSION,
-        "photograph": _photograph_name(session, session.state.get("edits") or {}),
-        "targets": targets,
-        "current": document.target(document.current).name if document.current != -1 else None,
-    }
+    for t, saved in zip(document.targets, edit.targets, strict=True):
+        if saved.mask not in existing:
+            session.write_mask(saved.mask, t.mask)
+            existing.add(saved.mask)
     acq = document.acquisition
+    present = set(session.cache_keys())
     if acq is not None:
-        d = acq.raw
-        cached = {acq.key: d}
+        cached = {acq.key: acq.raw}
         if acq.denoise:
-            cached[_denoised_key(acq.key, acq.denoise)] = acq.decomposition
-        present = set(session.cache_keys())
+            cached[denoised_key(acq.key, acq.denoise)] = acq.decomposition
         for key, decomposition in cached.items():
             if key not in present:
-                session.cache_put(key, _cache_arrays(decomposition))
-        edits["acquisition"] = {
-            "key": acq.key,
-            "cascade": [document.target(u).name for u in acq.cascade],
-            "kappas": [[float(k) for k in kap] for kap in acq.kappas],
-            "constraint": str(d.constraint),
-            "unreached_light": bool(d.unreached_light),
-            "denoise": int(acq.denoise),
-        }
-    session.update(edits=edits)
+                session.cache_put(key, decomposition.to_arrays())
+    save_edit(session, edit)
     if acq is not None:  # noise-reduced copies of other radii are no longer referenced (and are big)
-        keep = _denoised_key(acq.key, acq.denoise) if acq.denoise else None
+        keep = denoised_key(acq.key, acq.denoise) if acq.denoise else None
         for key in present:
             if key.startswith(f"{acq.key}-denoise") and key != keep:
                 session.cache_discard(key)
@@ -294,47 +264,18 @@ def save_document(document: Document, session: Session, *, mark_saved: bool = Tr
         document.mark_saved()
 
 
-def _cache_arrays(d: Decomposition) -> dict:
-    """The cache layout of engine.workflow.cache_decomposition, so either side can read it."""
-    arrays = {
-        "components": d.components,
-        "unreached": d.unreached,
-        "target": d.target,
-        "flags": np.array([d.unreached_light], bool),
-        "constraint": np.frombuffer(str(d.constraint).encode().ljust(16), np.uint8),
-    }
-    if d.residual is not None:
-        arrays["residual"] = d.residual
-    return arrays
-
-
-def _mask_name(mask: np.ndarray) -> str:
-    digest = hashlib.sha256(np.packbits(mask).tobytes() + str(mask.shape).encode()).hexdigest()
-    return f"edit-{digest[:16]}"
-
-
 # ----------------------------------------------------------------------------- export
 
 
 def edit_metadata(document: Document) -> dict:
-    """The edit as JSON-able metadata: targets (name, κ, pixels, cascade position), order, source."""
-    acq = document.acquisition
-    cascade = [] if acq is None else [document.target(u).name for u in acq.cascade]
+    """The edit as exported files carry it: ``{METADATA_KEY: engine.session.edit.export_metadata(...)}``."""
     d = document.decomposition
     return {
-        "edit": {
-            "source": document.source,
-            "targets": [
-                {"name": t.name, "kappa": [float(k) for k in t.kappa], "pixels": int(np.count_nonzero(t.mask)),
-                 "cascade_position": i + 1, "acquired": t.name in cascade}
-                for i, t in enumerate(document.targets)
-            ],
-            "cascade": cascade,
-            "kappa": [float(k) for k in document.recolor_kappa()],
-            "order": None if d is None else int(d.order),
-            "constraint": None if d is None else str(d.constraint),
-            "denoise": 0 if acq is None else int(acq.denoise),
-        }
+        METADATA_KEY: export_metadata(
+            document_edit(document), source=document.source,
+            pixels={t.name: int(np.count_nonzero(t.mask)) for t in document.targets},
+            order=None if d is None else d.order, constraint=None if d is None else d.constraint,
+        )
     }
 
 
@@ -367,7 +308,9 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
     Raises
     ------
     InputError
-        Nothing acquired, unsupported format/dtype, values out of range for uint16.
+        Nothing acquired, unsupported format or dtype.
+    NeedsClipping
+        Values out of range for uint16 without ``clip`` (an :class:`InputError` too).
     Cancelled
         Stopped before the write started (nothing written).
     """
@@ -389,20 +332,19 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
     report(progress, 1, 3, "converting")
     if ext == ".png":
         pixels = imageio.to_display(image, exposure=exposure)
-        meta["edit"]["display"] = {"exposure": float(exposure), "transfer": "sRGB", "clipped": True}
+        meta[METADATA_KEY]["display"] = {"exposure": float(exposure), "transfer": "sRGB", "clipped": True}
     elif dtype == "uint16":
         pixels = image * np.float32(2.0**exposure)
         over = int(np.count_nonzero((pixels > 1.0) | (pixels < 0.0)))
         if over and not clip:
-            raise InputError(
+            raise NeedsClipping(
                 f"{over} values fall outside [0, 1] after an exposure of {exposure:+g} stops and a 16-bit TIFF "
-                "cannot hold them: lower the exposure, export float, or allow clipping"
-            )
+                "cannot hold them: lower the exposure, export float, or allow clipping", values=over)
         pixels = np.clip(pixels, 0.0, 1.0)
-        meta["edit"]["linear"] = {"exposure": float(exposure), "clipped_values": over}
+        meta[METADATA_KEY]["linear"] = {"exposure": float(exposure), "clipped_values": over}
     else:
         pixels = image
-        meta["edit"]["linear"] = {"exposure": 0.0}
+        meta[METADATA_KEY]["linear"] = {"exposure": 0.0}
     checkpoint(should_stop, "export")
     report(progress, 2, 3, f"writing {path.name}")
     imageio.write_image(path, pixels, dtype=dtype, metadata=meta)

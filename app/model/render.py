@@ -1,59 +1,40 @@
-"""What the canvas shows, computed without Qt: one :class:`Frame` per :class:`Request`.
+"""What the canvas shows, computed without Qt: the data every view draws from.
 
-A :class:`Renderer` holds screen-sized copies of everything a view needs (the decomposition
+A :class:`ViewRenderer` holds screen-sized copies of everything a view needs (the decomposition
 packed by :func:`engine.recolor.prepare_preview`, the photograph averaged the same way) so a
 slider event costs one preview recolor plus one display conversion. Full resolution is used
-for export (:mod:`app.model.files`), for the pixel read-out (:meth:`Renderer.readout`), which
+for export (:mod:`app.model.files`), for the pixel read-out (:meth:`ViewRenderer.pixel`), which
 recolors the single pixel under the cursor exactly, and for the :class:`Detail` of the visible
-region once the canvas is zoomed in past the preview's resolution.
+region once the canvas is zoomed in past the preview's resolution. Which view draws what is
+the table in :mod:`app.model.views`.
 
-Renderers are immutable after :meth:`Renderer.prepare` and only read their own copies, so the
-preview worker can call :meth:`Renderer.render` on its thread while the user keeps editing.
+Renderers are immutable after :meth:`ViewRenderer.prepare` and only read their own copies, so the
+preview worker can render from one on its thread while the user keeps editing.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
-from app.model.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, recolor_rgb32, robust_max, to_rgb32
-from engine.acquire.predict import relative_error
+from app.model.display import recolor_rgb32, to_rgb32
 from engine.errors import InputError
 from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
-
-
-class View(StrEnum):
-    """Canvas views (the View menu)."""
-
-    RECOLORED = "recolored"
-    ORIGINAL = "original"
-    SPLIT = "split"
-    DIFFERENCE = "difference"
-    COMPONENTS = "components"
-    TRUTH = "truth"
-    ERROR = "error"
-
-
-#: Views that only make sense with a decomposition / with ground truth (virtual rig).
-NEEDS_DECOMPOSITION = frozenset({View.DIFFERENCE, View.COMPONENTS, View.ERROR})
-NEEDS_TRUTH = frozenset({View.TRUTH, View.ERROR})
-#: Views that sharpen to full resolution when zoomed in (the diagnostic false-colour views
-#: keep the preview's scale and resolution).
-DETAIL_VIEWS = frozenset({View.RECOLORED, View.ORIGINAL, View.SPLIT})
 
 
 @dataclass(frozen=True)
 class Request:
     """Everything a frame depends on besides the renderer's data.
 
-    ``kappa`` is the κ the decomposition is recolored with (the last cascade target's);
-    ``edit`` is the whole edit as ``((mask_version, kappa), ...)`` per target, for ground truth.
+    ``view`` is a :class:`app.model.views.CanvasView`; ``kappa`` is the κ the decomposition is
+    recolored with (the last cascade target's); ``edit`` is the whole edit as
+    ``((MaskSnapshot, kappa), ...)`` per target, for views that show every target (ground truth,
+    the naive recolor).
     """
 
-    view: View
+    view: str
     kappa: tuple[float, float, float] = (1.0, 1.0, 1.0)
     exposure: float = 0.0
     edit: tuple = ()
@@ -82,7 +63,7 @@ class Tile:
 
 
 @dataclass(eq=False)
-class Frame:
+class PreviewFrame:
     """A displayable frame.
 
     Attributes
@@ -100,9 +81,11 @@ class Frame:
     tiles : list of Tile
     note : str
         One line for the status bar ("relative error 0.61 %").
+    banner : str
+        A message the canvas draws over the picture (what the view cannot show yet).
     """
 
-    view: View
+    view: str
     pixels: np.ndarray
     extent: tuple[int, int]
     second: np.ndarray | None = None
@@ -110,6 +93,7 @@ class Frame:
     scale: ScaleBar | None = None
     tiles: list[Tile] = field(default_factory=list)
     note: str = ""
+    banner: str = ""
     request: Request | None = None
     request_id: int = 0
     generation: int = 0
@@ -166,7 +150,7 @@ def component_grid(order: int, extent: tuple[int, int], view: tuple[int, int]) -
     return best
 
 
-class Renderer:
+class ViewRenderer:
     """Screen-sized data for every view of one document state (photograph + acquisition).
 
     Parameters
@@ -195,12 +179,14 @@ class Renderer:
         self.small_photo: np.ndarray | None = None
         self._tiles: dict[tuple[int, int], tuple[np.ndarray, list[Tile]]] = {}
         self._truth_cache: tuple[Any, np.ndarray] | None = None
+        self._naive_parts: tuple | None = None  # (mask snapshots, rest, per-target parts) of naive_small
 
     # ------------------------------------------------------------------ preparation
-    def prepare(self) -> Renderer:
+    def prepare(self) -> ViewRenderer:
         """Compute the reduced copies (slow for big images: run it on a worker)."""
         if self.decomposition is not None:
-            self.pack = prepare_preview(self.decomposition, (-(-self.shape[0] // self.factor), -(-self.shape[1] // self.factor)))
+            small = (-(-self.shape[0] // self.factor), -(-self.shape[1] // self.factor))
+            self.pack = prepare_preview(self.decomposition, small)
             if self.pack.shape != tuple(-(-s // self.factor) for s in self.shape):
                 raise InputError(f"preview pack shape {self.pack.shape} does not match factor {self.factor}")
         self.small_photo = area_average(self.photograph, self.factor)
@@ -211,62 +197,16 @@ class Renderer:
         return self.small_photo is not None
 
     # ------------------------------------------------------------------ frames
-    def render(self, request: Request) -> Frame:
-        """Compute the frame of ``request`` (views that can't be shown fall back to the original)."""
-        if not self.prepared:
-            self.prepare()
-        view = View(request.view)
-        if view in NEEDS_DECOMPOSITION and self.pack is None and view != View.ERROR:
-            view = View.ORIGINAL
-        if view in NEEDS_TRUTH and self.truth is None:
-            view = View.ORIGINAL
-        if view == View.ERROR and self.pack is None:
-            view = View.TRUTH
-        ev = request.exposure
-        if view == View.ORIGINAL:
-            return Frame(view, to_rgb32(self.small_photo, exposure=ev), self.shape, linear=self.small_photo)
-        if view in (View.RECOLORED, View.SPLIT):
-            if self.pack is None:
-                pixels, note = to_rgb32(self.small_photo, exposure=ev), "not acquired yet: showing the photograph"
-            else:  # the hot path: recolor and display conversion fused, no float image in between
-                pixels, note = recolor_rgb32(self.pack.decomposition, request.kappa, exposure=ev), ""
-            second = to_rgb32(self.small_photo, exposure=ev) if view == View.SPLIT else None
-            return Frame(view, pixels, self.shape, second=second, note=note)
-        if view == View.DIFFERENCE:
-            lin = self.recolored_small(request.kappa)
-            delta = luminance(lin) - luminance(self.small_photo)
-            s = robust_max(delta)
-            return Frame(view, false_colour(delta, -s, s, SIGNED_MAP), self.shape, linear=lin,
-                         scale=ScaleBar(-s, s, SIGNED_MAP, "Δ luminance (recolored − original)"))
-        if view == View.COMPONENTS:
-            pixels, tiles = self.component_tiles(request.grid, ev)
-            rows, cols = request.grid
-            return Frame(view, pixels, (rows * self.shape[0], cols * self.shape[1]), tiles=tiles,
-                         note="inside the target R^i L_d, outside C R^(i-1) L_d (first tile: L_d and L̄_d)")
-        truth_full = self.truth_full(request.edit)
-        truth_small = area_average(truth_full, self.factor)
-        if view == View.TRUTH:
-            return Frame(view, to_rgb32(truth_small, exposure=ev), self.shape, linear=truth_small, note="ground truth")
-        lin = self.recolored_small(request.kappa)
-        err = np.abs(luminance(lin) - luminance(truth_small))
-        s = robust_max(err)
-        note = f"relative error {100 * relative_error(lin, truth_small):.2f} %"
-        if self.emitters is not None and self.emitters.any():
-            surfaces = area_average(self.emitters.astype(np.float32), self.factor) == 0
-            note += f", {100 * relative_error(lin, truth_small, surfaces):.2f} % without the lamp"
-        return Frame(view, false_colour(err, 0.0, s, MAGNITUDE_MAP), self.shape, linear=lin,
-                     scale=ScaleBar(0.0, s, MAGNITUDE_MAP, "|recolored − ground truth| (luminance)"),
-                     note=note + " (preview resolution)")
+    def detail(self, request: Request, region: tuple[int, int, int, int], *, original: bool = False,
+               split: bool = False) -> Detail | None:
+        """Full-resolution pixels of ``region`` = (y0, y1, x0, x1): recolored (or the photograph).
 
-    def render_detail(self, request: Request, region: tuple[int, int, int, int]) -> Detail | None:
-        """Full-resolution pixels of ``region`` = (y0, y1, x0, x1) in ``request``'s view.
-
-        Returns None where the preview already is full resolution or the view has no detail
-        (:data:`DETAIL_VIEWS`). Recolored pixels are :func:`app.model.display.recolor_rgb32` of the
-        cropped decomposition, so they equal the export's pixels there.
+        None where the preview already is full resolution or the region is empty. Recolored
+        pixels are :func:`app.model.display.recolor_rgb32` of the cropped decomposition, so they
+        equal the export's pixels there; nothing acquired (or ``original``): the photograph.
+        ``split`` adds the photograph's patch as the second half.
         """
-        view = View(request.view)
-        if self.factor == 1 or view not in DETAIL_VIEWS:
+        if self.factor == 1:
             return None
         y0, y1, x0, x1 = clip_region(region, self.shape)
         if y1 <= y0 or x1 <= x0:
@@ -275,16 +215,48 @@ class Renderer:
         def photo():
             return to_rgb32(np.ascontiguousarray(self.photograph[y0:y1, x0:x1]), exposure=request.exposure)
 
-        if view == View.ORIGINAL or self.decomposition is None:
+        if original or self.decomposition is None:
             return Detail(photo(), (y0, y1, x0, x1), request)
         pixels = recolor_rgb32(self.decomposition.crop(y0, y1, x0, x1), request.kappa, exposure=request.exposure)
-        return Detail(pixels, (y0, y1, x0, x1), request, second=photo() if view == View.SPLIT else None)
+        return Detail(pixels, (y0, y1, x0, x1), request, second=photo() if split else None)
 
     def recolored_small(self, kappa) -> np.ndarray:
         """Linear preview of the recolored image (the photograph when nothing is acquired)."""
         if self.pack is None:
             return self.small_photo
         return recolor_preview(self.pack, kappa)
+
+    def naive_small(self, edit) -> np.ndarray:
+        """The naive per-pixel recolor at preview resolution: every target's pixels times its κ.
+
+        What a photo editor does without measurements (interreflections keep their colour).
+        Exactly the area average of the full-resolution naive recolor: the photograph's average
+        over each target's own pixels (a later target wins where they overlap) is computed once
+        per set of masks, so a κ change costs one multiply-add per target.
+        """
+        snaps = tuple(snap for snap, _ in edit)
+        if self._naive_parts is None or self._naive_parts[0] != snaps:
+            covered = np.zeros(self.shape, bool)
+            parts = []
+            for snap in reversed(snaps):  # cascade order: later targets first, they win overlaps
+                own = snap.mask & ~covered
+                covered |= own
+                parts.append(area_average(np.where(own[..., None], self.photograph, np.float32(0)), self.factor))
+            rest = area_average(np.where(covered[..., None], np.float32(0), self.photograph), self.factor)
+            self._naive_parts = (snaps, rest, parts[::-1])
+        _, rest, parts = self._naive_parts
+        out = rest.copy()
+        for part, (_, kappa) in zip(parts, edit, strict=True):
+            out += part * np.asarray(kappa, np.float32)
+        return out
+
+    def naive_pixel(self, x: int, y: int, edit) -> np.ndarray:
+        """The naive recolor at one full-resolution pixel."""
+        value = self.photograph[y, x].astype(np.float32)
+        for snap, kappa in reversed(edit):
+            if snap.mask[y, x]:
+                return value * np.asarray(kappa, np.float32)
+        return value
 
     def has_truth(self, edit) -> bool:
         """Whether the ground truth of ``edit`` is computed already (read-out never waits for it)."""
@@ -324,37 +296,12 @@ class Renderer:
             merged = np.where(inside, comps[i], outside) * np.float32(4.0**i)
             small = area_average(merged, n)
             r, c = divmod(i, cols)
-            canvas[r * th : (r + 1) * th, c * tw : (c + 1) * tw] = to_rgb32(np.ascontiguousarray(small), exposure=exposure)
+            tile = to_rgb32(np.ascontiguousarray(small), exposure=exposure)
+            canvas[r * th : (r + 1) * th, c * tw : (c + 1) * tw] = tile
             label = "R⁰L_d | L̄_d" if i == 0 else f"R{_sup(i)}L_d | C R{_sup(i - 1)}L_d"
             tiles.append(Tile(r * th, c * tw, th, tw, f"{label}   ×{4 ** i}"))
         self._tiles = {key: (canvas, tiles)}
         return canvas, tiles
-
-    # ------------------------------------------------------------------ read-out
-    def readout(self, view: View, x: int, y: int, kappa, edit=()) -> tuple[str, np.ndarray] | None:
-        """Exact linear value(s) at camera pixel (x, y) for the status bar, or None outside.
-
-        Returns a label and an RGB value; recolored values come from the full-resolution
-        decomposition at that pixel (same maths as :func:`engine.recolor.recolor`).
-        """
-        h, w = self.shape
-        if not (0 <= x < w and 0 <= y < h):
-            return None
-        photo = self.photograph[y, x]
-        view = View(view)
-        if view == View.ORIGINAL or (self.decomposition is None and view not in NEEDS_TRUTH):
-            return "original", photo
-        if view in NEEDS_TRUTH and self.truth is not None:
-            t = self.truth_full(edit)[y, x]
-            if view == View.TRUTH or self.decomposition is None:
-                return "ground truth", t
-            return "recolored − truth", self.pixel(x, y, kappa) - t
-        if self.decomposition is None:
-            return "original", photo
-        value = self.pixel(x, y, kappa)
-        if view == View.DIFFERENCE:
-            return "recolored − original", value - photo
-        return "recolored", value
 
     def pixel(self, x: int, y: int, kappa) -> np.ndarray:
         """Full-resolution recolored value at one pixel, through :func:`engine.recolor.recolor`."""
@@ -370,3 +317,20 @@ def clip_region(region, shape: tuple[int, int]) -> tuple[int, int, int, int]:
 
 def _sup(n: int) -> str:
     return str(n).translate(str.maketrans("0123456789", "⁰¹²³⁴⁵⁶⁷⁸⁹"))
+
+
+class MaskSnapshot:
+    """An immutable copy of a mask, compared by (uid, version) so edits hash cheaply."""
+
+    __slots__ = ("version", "mask")
+
+    def __init__(self, version: tuple[int, int], mask: np.ndarray):
+        self.version = version
+        self.mask = mask
+        mask.flags.writeable = False
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, MaskSnapshot) and other.version == self.version
+
+    def __hash__(self) -> int:
+        return hash(self.version)

@@ -29,13 +29,12 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.qt.rig_views import ProgressEta, ThumbnailStrip, finish_job, rig_lock, worker_rig
-from app.qt.worker import Job, UiCaller
+from app.qt.rig_views import ThumbnailStrip
+from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
 from engine.acquire import Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
-from engine.progress import checkpoint
-from engine.workflow import estimated_report, load_calibration, run_capture
+from engine.workflow import Unreachable, check_rig, estimated_report, load_calibration, preflight, run_capture
 
 __all__ = ["AcquisitionPanel", "POLICIES", "unreachable_pixels"]
 
@@ -70,18 +69,6 @@ def unreachable_pixels(calibration, mask: np.ndarray) -> np.ndarray:
     mask = np.asarray(mask, bool)
     filled, _ = fill_correspondence(calibration.correspondence, mask)
     return mask & ~filled.valid
-
-
-def _acquire(rig, session, targets, order, *, caller, progress=None, should_stop=None, **options):
-    """Job body: take the rig's lock, then :func:`run_capture` with the projector on the UI thread."""
-    lock = rig_lock(rig)
-    while not lock.acquire(timeout=0.05):
-        checkpoint(should_stop, "acquisition")
-    try:
-        return run_capture(worker_rig(rig, caller), session, targets, order, progress=progress,
-                           should_stop=should_stop, **options)
-    finally:
-        lock.release()
 
 
 class AcquisitionPanel(QWidget):
@@ -145,22 +132,29 @@ class AcquisitionPanel(QWidget):
         self.fixed_kappa: list = []
         self.job: Job | None = None
         self._cancelling = False
+        self._conflict = False
+        self._error_shown = False
+        #: ``branch(reason) -> Session or None``: asked when the session holds another plan; a new
+        #: session to acquire into (the owner asks the user), or None to stay refused.
+        self.branch = None
+        self._shots = 0
         self._left_out: list[str] = []
         self.result = None
 
-        self.order = QSpinBox(minimum=1, maximum=8, value=4)
+        self.order = QSpinBox(minimum=1, maximum=8, value=4, objectName="acquire_order")
         self.order.setToolTip("K: the photograph plus K−1 re-emissions per target (a K-th order decomposition)")
-        self.policy = QComboBox()
+        self.policy = QComboBox(objectName="acquire_policy")
         for label, _ in POLICIES:
             self.policy.addItem(label)
-        self.threshold = QDoubleSpinBox(decimals=2, minimum=0.01, maximum=50.0, value=1.0, suffix=" %")
+        self.threshold = QDoubleSpinBox(decimals=2, minimum=0.01, maximum=50.0, value=1.0, suffix=" %",
+                                        objectName="acquire_threshold")
         self.threshold.setToolTip("relative error accepted for a predicted capture (paper: 1 %)")
-        self.emission = QComboBox()
+        self.emission = QComboBox(objectName="acquire_emission")
         for label, _ in _EMISSIONS:
             self.emission.addItem(label)
-        self.frames = QSpinBox(minimum=1, maximum=256, value=1)
+        self.frames = QSpinBox(minimum=1, maximum=256, value=1, objectName="acquire_frames")
         self.frames.setToolTip("frames averaged per capture: noise falls as 1/√frames")
-        self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach")
+        self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach", objectName="acquire_leave_out")
         self.leave_out.setToolTip("otherwise Start refuses a target with such pixels; left-out pixels keep "
                                   "their colour when the target is recolored")
         form = QFormLayout()
@@ -171,18 +165,18 @@ class AcquisitionPanel(QWidget):
         form.addRow("Frames averaged", self.frames)
         form.addRow(self.leave_out)
 
-        self.targets_label = QLabel()
+        self.targets_label = QLabel(objectName="acquire_targets")
         self.targets_label.setWordWrap(True)
-        self.start_button = QPushButton("Start")
-        self.pause_button = QPushButton("Pause")
-        self.pause_button.setCheckable(True)
-        self.cancel_button = QPushButton("Cancel")
+        self.start_button = QPushButton("Start", objectName="acquire_start")
+        self.eta = JobProgress("acquire_progress", unit="camera shots", stacked=True, buttons=False)
+        self.pause_button, self.cancel_button = self.eta.pause, self.eta.cancel
         buttons = QHBoxLayout()
         for b in (self.start_button, self.pause_button, self.cancel_button):
             buttons.addWidget(b)
-        self.eta = ProgressEta(unit="captures", stacked=True)
+        buttons.addStretch(1)
         self.thumbnails = ThumbnailStrip(size=thumb_size)
-        self.status = QLabel()
+        self.thumbnails.setObjectName("acquire_thumbnails")
+        self.status = QLabel(objectName="acquire_status")
         self.status.setWordWrap(True)
 
         lay = QVBoxLayout(self)
@@ -196,8 +190,6 @@ class AcquisitionPanel(QWidget):
 
         self.policy.currentIndexChanged.connect(self._update)
         self.start_button.clicked.connect(self.start)
-        self.pause_button.toggled.connect(self._on_pause_toggled)
-        self.cancel_button.clicked.connect(self.cancel)
         self._thumbnail_ready.connect(self._on_thumbnail)
         self.set_targets(targets, fixed_kappa)
         self.set_session(session)
@@ -239,10 +231,16 @@ class AcquisitionPanel(QWidget):
         self._update()
 
     def set_targets(self, targets, fixed_kappa=()) -> None:
-        """Targets in cascade order as (name, mask), and the fixed κ of all but the last."""
+        """Targets in cascade order as (name, mask), and the fixed κ of all but the last.
+
+        The masks are not copied (the panel follows a document's targets as they are painted);
+        a run captures them as they are when it starts, and editing is locked while it runs.
+        """
         if self.busy:
             raise InputError("cannot change the targets while an acquisition runs")
-        self.targets = [(str(n), np.array(m, bool)) for n, m in targets]
+        self.targets = [(str(n), np.asarray(m, bool)) for n, m in targets]
+        if self._error_shown:  # a refusal was about the targets as they were
+            self._note("")
         self.fixed_kappa = [np.broadcast_to(np.asarray(k, float), (3,)).copy() for k in fixed_kappa]
         self._update()
 
@@ -253,15 +251,6 @@ class AcquisitionPanel(QWidget):
     def adaptive(self) -> Adaptive | None:
         policy = POLICIES[self.policy.currentIndex()][1]
         return None if policy == "brute" else Adaptive(policy, self.threshold.value() / 100.0)
-
-    def _plan(self) -> dict:
-        """The plan :func:`run_capture` will store (compared with the session's before a run)."""
-        from engine.workflow import capture_plan
-
-        return capture_plan(
-            self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
-            settings=self.capture_settings(), adaptive=self.adaptive(),
-        )
 
     def _plan_captures(self) -> list[str]:
         if self.session is None:
@@ -274,65 +263,50 @@ class AcquisitionPanel(QWidget):
 
     def _prepare(self) -> tuple[str, list, dict[str, int]]:
         """(refusal reason or "", the targets to acquire, pixels left out per target)."""
+        self._conflict = False
         if self.busy:
             return f"{self.job.name} is still running.", [], {}
         if self.rig is None:
-            return "No rig is open: open and calibrate one first (Calibrate the rig…).", [], {}
+            return "No rig is open: open and calibrate one first (Rig ▸ Calibrate Rig…).", [], {}
         if self.session is None:
-            return "No session: calibrate the rig into a session first (Calibrate the rig…).", [], {}
+            return "No session: calibrate the rig first (Rig ▸ Calibrate Rig…).", [], {}
+        calibrated = bool(self.session.read_calibration()[0])
+        if calibrated:
+            try:
+                check_rig(load_calibration(self.session), self.rig)
+            except (InputError, SessionError) as exc:  # made for another set-up (e.g. another resolution)
+                self._conflict = True
+                return f"{exc}.", [], {}
         try:
-            calibration = load_calibration(self.session)
-            calibration.check_compatible(self.rig.identity, tuple(self.rig.camera.resolution),
-                                         tuple(self.rig.projector.resolution))
-        except (SessionError, InputError) as exc:
-            return f"{exc}. Calibrate the rig into this session first (Calibrate the rig…).", [], {}
-        if not self.targets:
-            return "There is no target to acquire: paint one first.", [], {}
-        if len(self.fixed_kappa) != len(self.targets) - 1:
-            return (f"A cascade of {len(self.targets)} targets needs the fixed κ of the first "
-                    f"{len(self.targets) - 1}, got {len(self.fixed_kappa)}."), [], {}
-        targets, left_out = [], {}
-        for name, mask in self.targets:
-            if mask.shape != calibration.camera_resolution:
-                return (f"Target {name!r} is {mask.shape[1]}×{mask.shape[0]} pixels but the camera is "
-                        f"{calibration.camera_resolution[1]}×{calibration.camera_resolution[0]}."), [], {}
-            if not mask.any():
-                return f"Target {name!r} is empty: paint it first.", [], {}
-            bad = unreachable_pixels(calibration, mask)
-            if bad.any() and (not self.leave_out.isChecked() or bad.sum() == mask.sum()):
-                counts = calibration.correspondence.counts(bad)
-                why = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in counts.items() if n and k != "decoded")
-                return (f"Target {name!r}: {int(bad.sum())} of {int(mask.sum())} painted pixels cannot be reached "
-                        f"by the projector ({why}). Erase them from the target (the calibration's coverage map "
-                        "shows where the projector reaches), or move the projector and recalibrate."), [], {}
-            if bad.any():
-                left_out[name] = int(bad.sum())
-                mask = mask & ~bad
-            targets.append((name, mask))
-        previous = self.session.state.get("plan")
-        if previous is not None:
-            if previous != self._plan():
-                return (f"This session already holds a different acquisition plan (targets "
-                        f"{previous.get('targets')}, order {previous.get('order')}): set the same controls to "
-                        "resume it, or acquire into a new session folder."), [], {}
-            for name, mask in targets:
-                if name in self.session.masks and not np.array_equal(self.session.read_mask(name), mask):
-                    return (f"Target {name!r} was painted differently when this session's acquisition began: "
-                            "acquire the new mask into a new session folder."), [], {}
-        return "", targets, left_out
+            checked = preflight(
+                self.rig, self.session, self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
+                settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
+                unreachable=Unreachable.LEAVE_OUT if self.leave_out.isChecked() else Unreachable.REFUSE)
+        except SessionError as exc:
+            # preflight's SessionErrors: no calibration, or another plan in this (calibrated) session
+            self._conflict = calibrated and self.session.state.get("plan") is not None
+            return str(exc), [], {}
+        except InputError as exc:
+            return str(exc), [], {}
+        return "", checked.targets, checked.left_out
 
     # ------------------------------------------------------------------ run
     def start(self) -> Job | None:
         """Start (or resume) the acquisition; None and a dialog if it cannot start."""
         reason, targets, left_out = self._prepare()
+        if reason and self._conflict and self.branch is not None:
+            branched = self.branch(reason)  # the owner offers a new session folder
+            if branched is None:
+                self._note(reason, error=True)
+                return None
+            self.set_session(branched)
+            reason, targets, left_out = self._prepare()
         if reason:
             self._note(reason, error=True)
             self.refused.emit(reason)
             QMessageBox.warning(self, "Cannot start the acquisition", reason)
             return None
         self.result = None
-        self.eta.reset()
-        self.pause_button.setChecked(False)
         size = self.thumbnails.thumb_size
         self.thumbnails.clear()
 
@@ -340,12 +314,11 @@ class AcquisitionPanel(QWidget):
             self._thumbnail_ready.emit(name, ThumbnailStrip.make_thumbnail(image, size))
 
         resumed = len(self._plan_captures())
-        job = Job(_acquire, self.rig, self.session, targets, int(self.order.value()),
+        job = Job(run_on_rig, run_capture, self.rig, self.session, targets, int(self.order.value()),
                   caller=self.ui, fixed_kappa=[k.copy() for k in self.fixed_kappa],
                   settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
                   on_capture=on_capture, name="Acquiring", synchronous=self.synchronous)
-        job.progress.connect(self.eta.update_progress)
-        job.paused.connect(self._on_paused)
+        job.progress.connect(self._on_progress)
         job.finished.connect(self._on_finished)
         job.failed.connect(self._on_failed)
         job.cancelled.connect(self._on_cancelled)
@@ -358,6 +331,8 @@ class AcquisitionPanel(QWidget):
         notes += self._left_out
         self._note("\n".join(notes))
         self.busy_changed.emit(True)
+        self.eta.attach(job)
+        self._shots = resumed
         self.started.emit(job)
         job.start()
         if self.busy:  # threaded: lock the controls until it ends (a synchronous run has ended already)
@@ -385,9 +360,10 @@ class AcquisitionPanel(QWidget):
 
         Called by :meth:`closeEvent`; call it before deleting a panel that was never shown.
         """
-        if self.busy:
-            self._cancelling = True
-        return finish_job(self.job, timeout=timeout)
+        if not self.busy:
+            return True
+        self._cancelling = True
+        return self.job.wait(timeout, cancel=True)
 
     def closeEvent(self, event) -> None:  # noqa: N802 (Qt name)
         self.shutdown()
@@ -398,25 +374,19 @@ class AcquisitionPanel(QWidget):
         self.thumbnails.add_thumbnail(name, rgb)
         self.thumbnail_added.emit(name)
 
-    def _on_pause_toggled(self, on: bool) -> None:
-        self.pause() if on else self.resume()
-
-    def _on_paused(self, on: bool) -> None:
-        self.pause_button.blockSignals(True)
-        self.pause_button.setChecked(on)
-        self.pause_button.blockSignals(False)
-        self.pause_button.setText("Resume" if on else "Pause")
-        if on:
-            self.eta.set_note("paused")
+    def _on_progress(self, step: int, total: int, _message: str) -> None:
+        self._shots = max(self._shots, int(step))
 
     def _on_finished(self, result) -> None:
         self.result = result
-        lines = [f"Captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots)."]
+        shots = max(self._shots, result.captures)
+        lines = [f"Captured {result.images} observation images ({result.predicted} more predicted) in {shots} "
+                 f"camera shots: {result.captures} for the observations, {shots - result.captures} for the "
+                 "direct image D."]
         lines += self._left_out + [f"{name}: {prepared.report()}" for name, prepared in result.targets]
         if self.session is not None and (line := estimated_report(self.session)):
             lines.append(line + ".")
         self._note("\n".join(lines))
-        self.eta.set_note("done")
         self.acquired.emit(result)
 
     def _on_failed(self, exc) -> None:
@@ -429,18 +399,17 @@ class AcquisitionPanel(QWidget):
         kept = len(self._plan_captures())
         self._note(f"Cancelled. The {kept} captures taken so far are kept in the session: Resume continues "
                    "where it stopped.")
-        self.eta.set_note("cancelled")
         self.cancelled.emit()
 
     def _on_ended(self, job: Job) -> None:
         if self.job is job:
             self.job = None
-        self._on_paused(False)
         self._update()
         self.busy_changed.emit(False)
 
     # ------------------------------------------------------------------ display
     def _note(self, text: str, *, error: bool = False) -> None:
+        self._error_shown = error
         body = _esc(text).replace("\n", "<br>")
         self.status.setText(f"<span style='color:{_RED}'>{body}</span>" if error else body)
 
@@ -450,15 +419,13 @@ class AcquisitionPanel(QWidget):
             w.setEnabled(not busy)
         self.threshold.setEnabled(not busy and POLICIES[self.policy.currentIndex()][1] != "brute")
         self.start_button.setEnabled(not busy)
-        self.pause_button.setEnabled(busy)
-        self.cancel_button.setEnabled(busy)
         interrupted = (self.session is not None and self.session.state.get("plan") is not None
                        and self.session.state.get("status") != "captured" and bool(self._plan_captures()))
         self.start_button.setText("Resume" if interrupted and not busy else "Start")
         if self.targets:
             parts = [f"{_esc(n)} (κ fixed {', '.join(f'{v:g}' for v in k)})"
-                     for (n, _), k in zip(self.targets[:-1], self.fixed_kappa)]
-            parts.append(f"<b>{_esc(self.targets[-1][0])}</b> (acquired, κ free)")
+                     for (n, _), k in zip(self.targets[:-1], self.fixed_kappa, strict=False)]
+            parts.append(f"<b>{_esc(self.targets[-1][0])}</b> (κ free)")
             self.targets_label.setText("Targets: " + " → ".join(parts))
         else:
             self.targets_label.setText("No target yet: paint one.")

@@ -17,7 +17,8 @@ from PySide6.QtWidgets import QWidget
 
 from app.model.document import Document
 from app.model.painting import EventType, MouseEvent, Painter, Tool
-from app.model.render import Detail, Frame, View
+from app.model.render import Detail, PreviewFrame
+from app.model.views import CanvasView
 
 _BACKGROUND = QColor(38, 38, 40)
 _OVERLAY_ALPHA = 0  # other targets: outline only, so the recoloring stays visible
@@ -62,7 +63,7 @@ class Canvas(QWidget):
         self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent)
         self.doc = document
         self.painter = painter
-        self.frame: Frame | None = None
+        self.frame: PreviewFrame | None = None
         self._images: tuple[QImage, QImage | None] | None = None
         self.detail: Detail | None = None
         self._detail_images: tuple[QImage, QImage | None] | None = None
@@ -89,7 +90,7 @@ class Canvas(QWidget):
         self._rebuild_overlay()
 
     # ------------------------------------------------------------------ frames and geometry
-    def set_frame(self, frame: Frame) -> None:
+    def set_frame(self, frame: PreviewFrame) -> None:
         """Show ``frame`` (keeps a reference: the QImages wrap its arrays)."""
         extent_changed = tuple(frame.extent) != self._extent
         self.frame = frame
@@ -167,7 +168,7 @@ class Canvas(QWidget):
         return QRectF(self.offset.x(), self.offset.y(), w * self.zoom, h * self.zoom)
 
     def _paints_camera_pixels(self) -> bool:
-        return self.frame is None or self.frame.view != View.COMPONENTS
+        return self.frame is None or self.frame.view != CanvasView.COMPONENTS
 
     # ------------------------------------------------------------------ overlays
     @staticmethod
@@ -232,6 +233,8 @@ class Canvas(QWidget):
         self._draw_tool(p)
         if self.frame is not None and self.frame.scale is not None:
             self._draw_scale(p)
+        if self.frame is not None and self.frame.banner:
+            self._draw_banner(p, self.frame.banner)
         p.end()
         self.paint_count += 1
         if self.frame is not None:
@@ -314,6 +317,18 @@ class Canvas(QWidget):
             for colour, width in ((QColor(0, 0, 0, 180), 3), (QColor(255, 255, 255), 1)):
                 p.setPen(QPen(colour, width, Qt.PenStyle.DashLine if self.painter.tool == Tool.ERASER else Qt.PenStyle.SolidLine))
                 p.drawEllipse(self._mouse, r, r)
+
+    def _draw_banner(self, p: QPainter, text: str) -> None:
+        """A strip across the top of the canvas saying what the view cannot show yet."""
+        flags = Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap
+        inner = QRectF(12, 0, max(self.width() - 24, 10), 1000)
+        box = p.boundingRect(inner, flags, text)
+        strip = QRectF(0, 0, self.width(), box.height() + 12)
+        p.setPen(Qt.PenStyle.NoPen)
+        p.setBrush(QColor(30, 60, 110, 215))
+        p.drawRect(strip)
+        p.setPen(QColor(245, 245, 245))
+        p.drawText(QRectF(12, 6, inner.width(), box.height()), flags, text)
 
     def _draw_scale(self, p: QPainter) -> None:
         s = self.frame.scale

@@ -7,10 +7,11 @@ blocker; nothing else.
 
 from __future__ import annotations
 
+import html
 import math
 
 import numpy as np
-from PySide6.QtCore import QSignalBlocker, Qt, Signal
+from PySide6.QtCore import QSignalBlocker, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QIcon, QPixmap
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -30,7 +31,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.model.document import KAPPA_MAX, KAPPA_MIN, Document
+from app.model.document import Document
+from app.model.noise import denoise_radius
+from app.model.target import KAPPA_MAX, KAPPA_MIN
 from engine.errors import InputError
 
 #: Slider ticks per doubling of κ (the slider is logarithmic).
@@ -67,22 +70,30 @@ def _swatch(colour, size: int = 14) -> QIcon:
 
 
 class TargetPanel(QWidget):
-    """List of targets in cascade order: add, rename (double click), delete, reorder."""
+    """List of targets in cascade order: add, rename (double click), delete, reorder, include.
+
+    Each row's check box says whether the next acquisition measures that target; the list
+    is rebuilt from the document on every change (the view is told about every row: nothing
+    is hidden from it by blocked model signals), and edits made while rebuilding are ignored.
+    """
 
     message = Signal(str)
 
     def __init__(self, document: Document, parent: QWidget | None = None):
         super().__init__(parent)
         self.doc = document
-        self.list = QListWidget()
+        self._syncing = False
+        self.list = QListWidget(objectName="targets_list")
         self.list.setDragDropMode(QAbstractItemView.DragDropMode.InternalMove)
         self.list.setDefaultDropAction(Qt.DropAction.MoveAction)
-        self.list.setEditTriggers(QAbstractItemView.EditTrigger.DoubleClicked | QAbstractItemView.EditTrigger.EditKeyPressed)
-        self.list.setToolTip("Targets in cascade order (first acquired first). Drag to reorder, double-click to rename.")
-        self.add_button = QToolButton(text="+", toolTip="Add a target")
-        self.remove_button = QToolButton(text="−", toolTip="Delete the selected target")
-        self.up_button = QToolButton(text="▲", toolTip="Move earlier in the cascade")
-        self.down_button = QToolButton(text="▼", toolTip="Move later in the cascade")
+        triggers = QAbstractItemView.EditTrigger
+        self.list.setEditTriggers(triggers.DoubleClicked | triggers.EditKeyPressed)
+        self.list.setToolTip("Targets in cascade order (first acquired first). Drag to reorder, double-click to "
+                             "rename; the check box includes a target in the next acquisition.")
+        self.add_button = QToolButton(text="+", toolTip="Add a target", objectName="target_add")
+        self.remove_button = QToolButton(text="−", toolTip="Delete the selected target", objectName="target_remove")
+        self.up_button = QToolButton(text="▲", toolTip="Move earlier in the cascade", objectName="target_up")
+        self.down_button = QToolButton(text="▼", toolTip="Move later in the cascade", objectName="target_down")
         buttons = QHBoxLayout()
         for b in (self.add_button, self.remove_button, self.up_button, self.down_button):
             buttons.addWidget(b)
@@ -105,21 +116,28 @@ class TargetPanel(QWidget):
 
     def refresh(self) -> None:
         """Rebuild the list from the document."""
-        with QSignalBlocker(self.list), QSignalBlocker(self.list.model()):
+        self._syncing = True
+        try:
             self.list.clear()
             for i, t in enumerate(self.doc.targets):
                 item = QListWidgetItem(_swatch(t.colour), t.name)
                 item.setData(Qt.ItemDataRole.UserRole, t.uid)
                 flags = item.flags() | Qt.ItemFlag.ItemIsEditable | Qt.ItemFlag.ItemIsDragEnabled
-                item.setFlags(flags & ~Qt.ItemFlag.ItemIsDropEnabled)
+                item.setFlags((flags | Qt.ItemFlag.ItemIsUserCheckable) & ~Qt.ItemFlag.ItemIsDropEnabled)
+                item.setCheckState(Qt.CheckState.Checked if t.included else Qt.CheckState.Unchecked)
                 lock = self.doc.mask_lock(t.uid)
-                item.setToolTip(f"cascade position {i + 1}" + (f"\n{lock}" if lock else ""))
-                if lock:
-                    item.setText(f"{t.name}  (acquired)")
-                    item.setFlags(item.flags() & ~Qt.ItemFlag.ItemIsEditable)
+                tip = f"cascade position {i + 1}; " + ("included in" if t.included else "left out of") + \
+                    " the next acquisition (check box)"
+                item.setToolTip(tip + (f"\n{lock}" if lock else ""))
+                if lock:  # acquired: shown in italics (the name itself stays editable)
+                    font = item.font()
+                    font.setItalic(True)
+                    item.setFont(font)
                 self.list.addItem(item)
                 if t.uid == self.doc.current:
                     self.list.setCurrentItem(item)
+        finally:
+            self._syncing = False
         self._update_buttons()
 
     def _uid(self, item) -> int:
@@ -153,34 +171,48 @@ class TargetPanel(QWidget):
             self._guard(self.doc.move_target, uid, self.doc.index(uid) + step)
 
     def _on_selected(self, item, _previous) -> None:
-        self.doc.set_current(self._uid(item))
+        if not self._syncing:
+            self.doc.set_current(self._uid(item))
 
     def _on_current(self, uid: int) -> None:
-        with QSignalBlocker(self.list):
+        self._syncing = True
+        try:
             for row in range(self.list.count()):
                 if self._uid(self.list.item(row)) == uid:
                     self.list.setCurrentRow(row)
+        finally:
+            self._syncing = False
         self._update_buttons()
 
     def _on_item_changed(self, item) -> None:
         uid = self._uid(item)
-        if uid != -1 and item.text() != self.doc.target(uid).name:
+        if self._syncing or uid == -1:
+            return
+        t = self.doc.target(uid)
+        included = item.checkState() == Qt.CheckState.Checked
+        if included != t.included:
+            self._guard(self.doc.set_included, uid, included)
+        elif item.text() != t.name:
             self._guard(self.doc.rename_target, uid, item.text())
 
     def _on_rows_moved(self, *_args) -> None:
+        if self._syncing:
+            return
         order = [self._uid(self.list.item(r)) for r in range(self.list.count())]
         for index, uid in enumerate(order):
             if self.doc.index(uid) != index:
                 self._guard(self.doc.move_target, uid, index)
                 break
-        self.refresh()
+        QTimer.singleShot(0, self.refresh)  # not inside the view's own drop handling
 
 
 class AlbedoPanel(QWidget):
     """κ of the current target: R, G, B log sliders with numeric entry, link toggle, reset.
 
-    A slider drag is one undo step (begin/end gesture); typing a value is one step. Earlier
-    cascade targets are locked after acquisition, with a tooltip saying why.
+    A slider drag is one undo step (begin/end gesture); typing a value is one step. Linked
+    channels scale by one factor, which stops where the first channel reaches the slider's
+    range, so the ratios (the hue of the change) are never lost. Earlier cascade targets are
+    locked after acquisition, with a tooltip saying why.
     """
 
     CHANNELS = ("R", "G", "B")
@@ -191,7 +223,7 @@ class AlbedoPanel(QWidget):
         self.uid = -1
         grid = QGridLayout(self)
         grid.setContentsMargins(0, 0, 0, 0)
-        self.title = QLabel("No target selected")
+        self.title = QLabel("No target selected", objectName="albedo_title")
         self.title.setWordWrap(True)
         grid.addWidget(self.title, 0, 0, 1, 3)
         self.sliders: list[QSlider] = []
@@ -199,18 +231,17 @@ class AlbedoPanel(QWidget):
         lo, hi = kappa_to_ticks(KAPPA_MIN), kappa_to_ticks(KAPPA_MAX)
         for c, name in enumerate(self.CHANNELS):
             label = QLabel(f"κ {name}")
-            slider = QSlider(Qt.Orientation.Horizontal)
+            slider = QSlider(Qt.Orientation.Horizontal, objectName=f"kappa_{name}")
             slider.setRange(lo, hi)
             slider.setPageStep(TICKS_PER_STOP // 4)
             slider.setTickInterval(TICKS_PER_STOP)
             slider.setTickPosition(QSlider.TickPosition.TicksBelow)
-            slider.setObjectName(f"kappa_{name}")
-            spin = QDoubleSpinBox()
+            slider.setMinimumWidth(80)
+            spin = QDoubleSpinBox(objectName=f"kappa_{name}_value")
             spin.setRange(KAPPA_MIN, KAPPA_MAX)
-            spin.setDecimals(3)
+            spin.setDecimals(4)
             spin.setStepType(QDoubleSpinBox.StepType.AdaptiveDecimalStepType)
             spin.setKeyboardTracking(False)
-            spin.setObjectName(f"kappa_{name}_value")
             grid.addWidget(label, c + 1, 0)
             grid.addWidget(slider, c + 1, 1)
             grid.addWidget(spin, c + 1, 2)
@@ -220,15 +251,15 @@ class AlbedoPanel(QWidget):
             spin.valueChanged.connect(lambda v, c=c: self._on_spin(c, v))
             self.sliders.append(slider)
             self.spins.append(spin)
-        self.link = QCheckBox("Link channels")
+        self.link = QCheckBox("Link channels", objectName="kappa_link")
         self.link.setToolTip("Move R, G and B together (their ratios, i.e. the hue of the change, are kept)")
         self.link.setChecked(True)
-        self.reset = QPushButton("Reset")
+        self.reset = QPushButton("Reset", objectName="kappa_reset")
         self.reset.setToolTip("κ = 1: the original albedo")
         self.reset.clicked.connect(self._reset)
         grid.addWidget(self.link, 4, 0, 1, 2)
         grid.addWidget(self.reset, 4, 2)
-        self.note = QLabel()
+        self.note = QLabel(objectName="albedo_note")
         self.note.setWordWrap(True)
         self.note.setStyleSheet("color: palette(placeholder-text);")
         grid.addWidget(self.note, 5, 0, 1, 3)
@@ -255,16 +286,17 @@ class AlbedoPanel(QWidget):
         if not has:
             self.title.setText("No target selected")
             self.note.setText("")
+            self._show(np.ones(3))
             return
         t = self.doc.target(uid)
-        self.title.setText(f"<b>{t.name}</b>" + (" — locked" if lock else ""))
+        self.title.setText(f"<b>{html.escape(t.name)}</b>" + (" — locked" if lock else ""))
         self.setToolTip(lock)
         acq = self.doc.acquisition
         if lock:
             self.note.setText(lock)
         elif acq is None:
-            self.note.setText("Not acquired yet: κ takes effect in the recolored view after acquisition "
-                              "(the Ground truth view previews it on the virtual rig).")
+            self.note.setText("Not acquired yet: the recolored view multiplies this target's pixels by κ (a naive "
+                              "recolor); acquire it on a rig for its interreflections to follow.")
         elif uid not in acq.cascade:
             self.note.setText("This target was added after the acquisition: acquire again to recolor it.")
         else:
@@ -298,23 +330,40 @@ class AlbedoPanel(QWidget):
     def _set(self, channel: int, value: float) -> None:
         if self.uid == -1:
             return
-        kappa = self.doc.target(self.uid).kappa.copy()
-        old = kappa[channel]
-        if self.link.isChecked() and old > 0:
-            # all channels by the same factor; the slider range is a UI limit, not data
-            kappa = np.clip(kappa * (value / old), KAPPA_MIN, KAPPA_MAX)
-        elif self.link.isChecked():
-            kappa[:] = value
-        kappa[channel] = value
+        kappa = linked_kappa(self.doc.target(self.uid).kappa, channel, value, linked=self.link.isChecked())
         try:
             self.doc.set_kappa(self.uid, kappa)
         except InputError as exc:
             QMessageBox.warning(self, "Albedo", str(exc))
-            self._show(self.doc.target(self.uid).kappa)
+        self._show(self.doc.target(self.uid).kappa)  # a linked move may have stopped at a limit
 
     def _reset(self) -> None:
         if self.uid != -1:
             self.doc.reset_kappa(self.uid)
+
+
+def linked_kappa(kappa, channel: int, value: float, *, linked: bool) -> np.ndarray:
+    """κ after setting ``channel`` to ``value``: alone, or with every channel by the same factor.
+
+    A linked change stops where the first channel reaches the slider range [1/16, 16], so the
+    ratios between channels (the hue of the change) never change.
+
+    Examples
+    --------
+    >>> linked_kappa([2.0, 0.125, 8.0], 2, 1.0, linked=True).tolist()  # G stops at 1/16: B can only halve
+    [1.0, 0.0625, 4.0]
+    >>> linked_kappa([2.0, 0.125, 8.0], 2, 1.0, linked=False).tolist()
+    [2.0, 0.125, 1.0]
+    """
+    k = np.array(kappa, dtype=np.float64)
+    if not linked or k[channel] <= 0:
+        k[channel] = value
+        return k
+    positive = k[k > 0]
+    lo = KAPPA_MIN / positive.min()
+    hi = KAPPA_MAX / positive.max()
+    factor = min(max(float(value) / k[channel], lo), hi)
+    return k * factor
 
 
 class NoiseReductionPanel(QWidget):
@@ -336,17 +385,16 @@ class NoiseReductionPanel(QWidget):
     def __init__(self, document: Document, parent: QWidget | None = None):
         super().__init__(parent)
         self.doc = document
-        self.radius = QSpinBox()
+        self.radius = QSpinBox(objectName="noise_radius")
         self.radius.setRange(0, 32)
         self.radius.setSuffix(" px")
         self.radius.setSpecialValueText("off")
-        self.radius.setValue(4)
         self.radius.setToolTip("Filter radius: larger removes more noise and blurs interreflections more (0 = off)")
-        self.apply = QPushButton("Apply")
+        self.apply = QPushButton("Apply", objectName="noise_apply")
         self.apply.setToolTip("Smooth the interreflection components along the photograph's edges; "
                               "κ = 1 still gives the photograph exactly")
         self.apply.clicked.connect(lambda: self.apply_requested.emit(self.radius.value()))
-        self.state = QLabel()
+        self.state = QLabel(objectName="noise_state")
         self.state.setWordWrap(True)
         self.state.setStyleSheet("color: palette(placeholder-text);")
         row = QHBoxLayout()
@@ -357,6 +405,8 @@ class NoiseReductionPanel(QWidget):
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addLayout(row)
         lay.addWidget(self.state)
+        self._judged = None
+        self._suggested, self._noise = 0, 0.0
         document.events.acquisition.connect(self._update)
         self._update()
 
@@ -366,7 +416,15 @@ class NoiseReductionPanel(QWidget):
             w.setEnabled(acq is not None)
         if acq is None:
             self.state.setText("Acquire a target first: noise reduction filters its decomposition.")
-        elif acq.denoise:
-            self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it).")
+            return
+        if acq.raw is not self._judged:  # a new measurement: suggest the radius its noise calls for
+            self._judged = acq.raw
+            self._suggested, self._noise = denoise_radius(acq.raw)
+            with QSignalBlocker(self.radius):
+                self.radius.setValue(acq.denoise or self._suggested)
+        suggestion = (f"Its noise is {100 * self._noise:.2g} % of the interreflections: "
+                      + (f"radius {self._suggested} px is suggested." if self._suggested else "no need to filter."))
+        if acq.denoise:
+            self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it). {suggestion}")
         else:
-            self.state.setText("Off: the decomposition as measured.")
+            self.state.setText(f"Off: the decomposition as measured. {suggestion}")

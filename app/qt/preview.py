@@ -1,14 +1,14 @@
 """Live preview: document changes → render requests → frames, latest request wins.
 
 :class:`PreviewController` watches a :class:`~app.model.document.Document`, keeps a
-:class:`~app.model.render.Renderer` for its current photograph and acquisition, and sends a
+:class:`~app.model.render.ViewRenderer` for its current photograph and acquisition, and sends a
 :class:`~app.model.render.Request` to a :class:`~app.qt.worker.LatestWorker` on every change that
 affects the picture (κ, view, exposure, masks for ground truth). Frames come back on the UI
 thread through :attr:`PreviewController.frame_ready`; results older than the frame on screen,
 or from a replaced renderer, are dropped.
 
 Zoomed in past the preview's resolution, the visible region is also rendered at full
-resolution (:meth:`~app.model.render.Renderer.render_detail`) on a second worker once the picture
+resolution (:func:`app.model.views.render_detail`) on a second worker once the picture
 has been still for :attr:`PreviewController.DETAIL_DELAY_MS`, and arrives through
 :attr:`PreviewController.detail_ready`: drags stay on the fast screen-sized path, and what the
 user inspects at 100 % is the export's pixels.
@@ -19,18 +19,10 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
 
+from app.model import views
 from app.model.document import Document
-from app.model.render import (
-    DETAIL_VIEWS,
-    NEEDS_DECOMPOSITION,
-    NEEDS_TRUTH,
-    Detail,
-    Frame,
-    Renderer,
-    Request,
-    View,
-    clip_region,
-)
+from app.model.render import Detail, MaskSnapshot, PreviewFrame, Request, ViewRenderer, clip_region
+from app.model.views import CanvasView, Need
 from app.qt.worker import LatestWorker
 
 
@@ -47,7 +39,7 @@ class PreviewController(QObject):
 
     Signals
     -------
-    frame_ready(Frame)
+    frame_ready(PreviewFrame)
     detail_ready(Detail)
         A full-resolution patch of the visible region for the frame of the same request.
     failed(str)
@@ -69,7 +61,7 @@ class PreviewController(QObject):
         super().__init__(parent)
         self.doc = document
         self.max_shape = tuple(int(v) for v in max_shape)
-        self.view = View.RECOLORED
+        self.view = CanvasView.RECOLORED
         self.exposure = 0.0
         self.grid = (1, 1)
         self.worker = LatestWorker(self._render, synchronous=synchronous, parent=self)
@@ -85,8 +77,8 @@ class PreviewController(QObject):
         self._detail_timer.setInterval(self.DETAIL_DELAY_MS)
         self._detail_timer.timeout.connect(self._submit_detail)
         self.generation = 0
-        self.renderer: Renderer | None = None
-        self.frame: Frame | None = None
+        self.renderer: ViewRenderer | None = None
+        self.frame: PreviewFrame | None = None
         self.last_request: Request | None = None
         self.last_id = 0
         self._shown_id = 0
@@ -100,8 +92,8 @@ class PreviewController(QObject):
         self.rebuild()
 
     # ------------------------------------------------------------------ settings
-    def set_view(self, view: View | str) -> None:
-        self.view = View(view)
+    def set_view(self, view: CanvasView | str) -> None:
+        self.view = CanvasView(view)
         self.request()
 
     def set_exposure(self, stops: float) -> None:
@@ -111,7 +103,7 @@ class PreviewController(QObject):
     def set_grid(self, grid: tuple[int, int]) -> None:
         if tuple(grid) != self.grid:
             self.grid = tuple(grid)
-            if self.view == View.COMPONENTS:
+            if self.view == CanvasView.COMPONENTS:
                 self.request()
 
     def set_viewport(self, region: tuple[int, int, int, int], zoom: float) -> None:
@@ -124,20 +116,17 @@ class PreviewController(QObject):
     def wants_detail(self) -> bool:
         """Whether the current view, zoom and region call for a full-resolution detail."""
         r = self.renderer
-        if r is None or self.viewport is None or self.view not in DETAIL_VIEWS:
+        if r is None or self.viewport is None or not views.shown(r, self.view).detail:
             return False
         region, zoom = self.viewport
         y0, y1, x0, x1 = clip_region(region, r.shape)
         area = max(y1 - y0, 0) * max(x1 - x0, 0)
         return r.factor > 1 and r.factor * zoom >= self.DETAIL_MAGNIFICATION and 0 < area <= self.MAX_DETAIL_PIXELS
 
-    def available(self, view: View) -> bool:
-        """Whether ``view`` can be shown for this document."""
-        if view in NEEDS_DECOMPOSITION and self.doc.decomposition is None:
-            return False
-        if view in NEEDS_TRUTH and self.doc.truth is None:
-            return False
-        return True
+    def available(self, view: CanvasView) -> bool:
+        """Whether ``view`` can be shown for this document (it has everything the view needs)."""
+        have = {Need.DECOMPOSITION: self.doc.decomposition is not None, Need.TRUTH: self.doc.truth is not None}
+        return all(have[n] for n in views.VIEW_SPECS[CanvasView(view)].needs)
 
     # ------------------------------------------------------------------ requests
     def rebuild(self) -> None:
@@ -145,14 +134,14 @@ class PreviewController(QObject):
         self.generation += 1
         truth = self._truth if self.doc.truth is not None else None
         emitters = getattr(self.doc.truth, "emitters", None)
-        self.renderer = Renderer(self.doc.photograph, self.doc.decomposition, truth=truth,
+        self.renderer = ViewRenderer(self.doc.photograph, self.doc.decomposition, truth=truth,
                                  emitters=emitters() if callable(emitters) else None, max_shape=self.max_shape)
         self.request()
 
     def request(self) -> int:
         """Ask for a frame of the current state; returns the request id."""
         req = Request(self.view, tuple(float(k) for k in self.doc.recolor_kappa()), self.exposure,
-                      self._edit() if self.view in NEEDS_TRUTH else (), self.grid)
+                      self._edit() if self._shows_edit() else (), self.grid)
         self.last_request = req
         self.last_id = self.worker.submit((self.generation, self.renderer, req))
         self._schedule_detail()
@@ -161,12 +150,12 @@ class PreviewController(QObject):
     def readout(self, x: int, y: int):
         """(label, RGB) of the linear value at camera pixel (x, y) in the current view, or None."""
         r = self.renderer
-        if r is None or self.view == View.COMPONENTS:
+        if r is None:
             return None
         edit = self.last_request.edit if self.last_request else ()
-        if self.view in NEEDS_TRUTH and not r.has_truth(edit):
+        if Need.TRUTH in views.shown(r, self.view).needs and not r.has_truth(edit):
             return None  # ground truth still being computed: never block the UI thread for it
-        return r.readout(self.view, x, y, self.doc.recolor_kappa(), edit)
+        return views.readout(r, self.view, x, y, self.doc.recolor_kappa(), edit)
 
     def close(self) -> None:
         self._detail_timer.stop()
@@ -175,16 +164,16 @@ class PreviewController(QObject):
 
     # ------------------------------------------------------------------ internals
     @staticmethod
-    def _render(payload) -> Frame:
+    def _render(payload) -> PreviewFrame:
         generation, renderer, request = payload
-        frame = renderer.render(request)
+        frame = views.render(renderer, request)
         frame.generation, frame.request = generation, request
         return frame
 
     @staticmethod
     def _render_detail(payload) -> Detail | None:
         generation, renderer, request, region = payload
-        detail = renderer.render_detail(request, region)
+        detail = views.render_detail(renderer, request, region)
         if detail is not None:
             detail.generation = generation
         return detail
@@ -206,7 +195,7 @@ class PreviewController(QObject):
             self.detail = detail
             self.detail_ready.emit(detail)
 
-    def _on_done(self, rid: int, frame: Frame) -> None:
+    def _on_done(self, rid: int, frame: PreviewFrame) -> None:
         if frame.generation != self.generation or rid <= self._shown_id:
             return  # stale: a newer frame is on screen, or the renderer was replaced
         self._shown_id = rid
@@ -219,18 +208,23 @@ class PreviewController(QObject):
     def _on_failed(self, rid: int, exc: Exception) -> None:
         self.failed.emit(f"preview failed: {exc}")
 
+    def _shows_edit(self) -> bool:
+        """Whether the view on screen draws every target's mask and κ (ground truth, naive recolor)."""
+        spec = views.shown(self.renderer, self.view)
+        return spec.edit and (Need.TRUTH in spec.needs or self.doc.decomposition is None)
+
     def _on_kappa(self, uid: int, kappa) -> None:
         acq = self.doc.acquisition
-        if (acq is not None and uid == acq.cascade[-1]) or self.view in NEEDS_TRUTH:
+        if (acq is not None and uid == acq.cascade[-1]) or self._shows_edit():
             self.request()
 
     def _on_mask(self, uid: int, bbox) -> None:
         self._mask_versions[uid] = self._mask_versions.get(uid, 0) + 1
-        if self.view in NEEDS_TRUTH:
+        if self._shows_edit():
             self.request()
 
     def _on_targets(self) -> None:
-        if self.view in NEEDS_TRUTH:
+        if self._shows_edit():
             self.request()
 
     def _edit(self) -> tuple:
@@ -249,20 +243,3 @@ class PreviewController(QObject):
 
     def _truth(self, edit) -> np.ndarray:
         return self.doc.truth.recolor([(snap.mask, np.array(kappa)) for snap, kappa in edit])
-
-
-class MaskSnapshot:
-    """An immutable copy of a mask, compared by (uid, version) so edits hash cheaply."""
-
-    __slots__ = ("version", "mask")
-
-    def __init__(self, version: tuple[int, int], mask: np.ndarray):
-        self.version = version
-        self.mask = mask
-        mask.flags.writeable = False
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, MaskSnapshot) and other.version == self.version
-
-    def __hash__(self) -> int:
-        return hash(self.version)

@@ -5,9 +5,8 @@
   :class:`~engine.calibrate.PixelStatus`, with a legend of counts.
 - :class:`ResponsePlot` — the projector response as measured (per channel) and as fitted.
 - :class:`ThumbnailStrip` — captures as they arrive, downscaled, in sRGB.
-- :class:`ProgressEta` — a progress bar with the count and the time left.
-- :func:`worker_rig` / :func:`rig_lock` — how a worker thread uses a rig: projector calls on the
-  UI thread (a projector may be a Qt window), one user of the rig at a time.
+
+(Progress displays and rig jobs live in :mod:`app.qt.worker`.)
 
 Display conversions clip to [0, 1] here, for the screen only; measurement data stay float.
 """
@@ -15,45 +14,31 @@ Display conversions clip to [0, 1] here, for the screen only; measurement data s
 from __future__ import annotations
 
 import math
-import threading
-import time
-import weakref
-from collections.abc import Callable
 
 import numpy as np
-from PySide6.QtCore import QCoreApplication, QEventLoop, QPointF, QRectF, QSize, Qt
+from PySide6.QtCore import QPointF, QRectF, QSize, Qt
 from PySide6.QtGui import QColor, QFont, QIcon, QImage, QPainter, QPainterPath, QPen, QPixmap
 from PySide6.QtWidgets import (
     QAbstractItemView,
-    QHBoxLayout,
-    QLabel,
     QListView,
     QListWidget,
     QListWidgetItem,
-    QProgressBar,
     QSizePolicy,
-    QVBoxLayout,
     QWidget,
 )
 
-from app.qt.worker import UiCaller, on_ui_thread
 from engine.calibrate import PixelStatus
 from engine.imageio import to_display
 
 __all__ = [
     "CoverageMap",
     "LiveView",
-    "ProgressEta",
     "ResponsePlot",
     "STATUS_COLOURS",
     "ThumbnailStrip",
     "display_rgb",
     "downscale",
-    "finish_job",
-    "format_duration",
     "rgb_to_qimage",
-    "rig_lock",
-    "worker_rig",
 ]
 
 #: Colour of each Gray-code pixel status on the coverage map, and its legend text.
@@ -134,90 +119,13 @@ def rgb_to_qimage(rgb: np.ndarray) -> QImage:
     return QImage(a.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
 
 
-def format_duration(seconds: float) -> str:
-    """Short, human duration: ``"<1 s"``, ``"42 s"``, ``"3 min 05 s"``, ``"2 h 07 min"``.
-
-    Examples
-    --------
-    >>> [format_duration(s) for s in (0.2, 42, 185, 7625)]
-    ['<1 s', '42 s', '3 min 05 s', '2 h 07 min']
-    """
-    s = max(float(seconds), 0.0)
-    if s < 1:
-        return "<1 s"
-    if s < 60:
-        return f"{s:.0f} s"
-    if s < 3600:
-        m, r = divmod(int(round(s)), 60)
-        return f"{m} min {r:02d} s"
-    h, r = divmod(int(round(s)), 3600)
-    return f"{h} h {r // 60:02d} min"
-
-
-_LOCKS: weakref.WeakKeyDictionary[object, threading.Lock] = weakref.WeakKeyDictionary()
-_LOCKS_GUARD = threading.Lock()
-
-
-def rig_lock(rig) -> threading.Lock:
-    """The lock a thread holds while it drives ``rig`` (live view, calibration, acquisition).
-
-    Worker threads take it; the UI thread never waits on it (a live-view grab that finds it
-    taken skips its frame).
-    """
-    with _LOCKS_GUARD:
-        lock = _LOCKS.get(rig)
-        if lock is None:
-            lock = _LOCKS[rig] = threading.Lock()
-        return lock
-
-
-def finish_job(job, *, timeout: float = 15.0) -> bool:
-    """Cancel ``job`` and wait until it has ended, still serving the UI thread meanwhile.
-
-    Events are processed while waiting, so a worker blocked on a UI-thread call (a projector
-    frame) can finish; the job stops at its next ``should_stop()`` (the next capture). Call it
-    before a widget that owns a job is closed, so no worker outlives the objects it reports to.
-
-    Returns
-    -------
-    bool
-        True if the job is no longer running (False after ``timeout`` seconds).
-    """
-    if job is None or not job.running:
-        return True
-    job.cancel()
-    deadline = time.monotonic() + float(timeout)
-    while job.running and time.monotonic() < deadline:
-        QCoreApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 50)
-    return not job.running
-
-
-class _WorkerRig:
-    """A rig as a worker thread sees it: ``projector`` calls run on the UI thread."""
-
-    def __init__(self, rig, caller: UiCaller):
-        self._rig = rig
-        self.projector = on_ui_thread(rig.projector, caller)
-
-    def __getattr__(self, name):
-        return getattr(self._rig, name)
-
-
-def worker_rig(rig, caller: UiCaller):
-    """Wrap ``rig`` for a worker: projector methods marshalled to the UI thread by ``caller``.
-
-    A projector may be a Qt window (``devices.qtscreen``), which only the UI thread may drive;
-    the worker waits until the frame is shown. Everything else (camera, names) passes through.
-    """
-    return _WorkerRig(rig, caller)
-
-
 # ---------------------------------------------------------------------------------- live view
 class LiveView(QWidget):
     """A camera frame scaled to fit (nearest neighbour), saturated pixels painted magenta.
 
-    The first frame sets the display scale; later frames are shown at ``exposure × gain``
-    relative to it, so the picture brightens with a longer exposure as the sensor does.
+    White on screen is the camera's full scale when frames say where it is; otherwise the first
+    frame sets the display scale and later frames are shown at ``exposure × gain`` relative to
+    it, so the picture brightens with a longer exposure as the sensor does.
 
     Attributes
     ----------
@@ -243,14 +151,23 @@ class LiveView(QWidget):
         self._scale = None
 
     def set_frame(self, image: np.ndarray, saturated: np.ndarray | None = None, *, exposure: float = 1.0,
-                  gain: float = 1.0) -> None:
-        """Show one frame: linear radiance ``image`` (H, W, 3), ``saturated`` (H, W) bool."""
+                  gain: float = 1.0, full_scale: float | None = None) -> None:
+        """Show one frame: linear radiance ``image`` (H, W, 3), ``saturated`` (H, W) bool.
+
+        With a known ``full_scale`` (``Frame.full_scale``), white on screen is where the camera
+        clips, so only a saturated frame looks white. A camera that does not clip (``inf``)
+        gives the same radiance at every exposure: the picture keeps the first frame's scale.
+        """
         a = np.asarray(image, np.float32)
-        sensor = float(exposure) * float(gain)
-        if self._scale is None:
-            top = float(np.percentile(a, 99.5)) if a.size else 0.0
-            self._scale = 0.8 / (top * sensor) if top > 0 and sensor > 0 else 1.0
-        self._image = rgb_to_qimage(display_rgb(a, scale=self._scale * sensor))
+        if full_scale is not None and np.isfinite(full_scale) and full_scale > 0:
+            scale = 1.0 / float(full_scale)
+        else:
+            sensor = float(exposure) * float(gain) if full_scale is None else 1.0
+            if self._scale is None:
+                top = float(np.percentile(a, 99.5)) if a.size else 0.0
+                self._scale = 0.8 / (top * sensor) if top > 0 and sensor > 0 else 1.0
+            scale = self._scale * sensor
+        self._image = rgb_to_qimage(display_rgb(a, scale=scale))
         sat = np.zeros(a.shape[:2], bool) if saturated is None else np.asarray(saturated, bool)
         self.saturated_fraction = float(sat.mean()) if sat.size else 0.0
         rgba = np.zeros(sat.shape + (4,), np.uint8)
@@ -494,65 +411,3 @@ class ThumbnailStrip(QListWidget):
     def names(self) -> list[str]:
         """Capture names, in arrival order."""
         return [self.item(i).data(Qt.ItemDataRole.UserRole) for i in range(self.count())]
-
-
-# ---------------------------------------------------------------------------------- progress
-class ProgressEta(QWidget):
-    """A progress bar reading ``"12 / 41 images"`` and a label with the message and time left.
-
-    The time left extrapolates the rate of steps since the first ``"capturing …"`` report of
-    this run (captures reused from a session arrive instantly and would mislead it).
-
-    Parameters
-    ----------
-    unit : str
-        What a step is ("images", "captures").
-    clock : callable
-        Seconds, monotonic (tests pass a fake one).
-    stacked : bool
-        Put the label under the bar (narrow docks) instead of beside it.
-    """
-
-    def __init__(self, parent: QWidget | None = None, *, unit: str = "images",
-                 clock: Callable[[], float] = time.monotonic, stacked: bool = False):
-        super().__init__(parent)
-        self.unit = unit
-        self.clock = clock
-        self.bar = QProgressBar()
-        self.bar.setTextVisible(True)
-        self.bar.setRange(0, 1)
-        self.bar.setValue(0)
-        self.bar.setFormat(f"0 / 0 {unit}")
-        self.label = QLabel()
-        self.label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        lay = QVBoxLayout(self) if stacked else QHBoxLayout(self)
-        lay.setContentsMargins(0, 0, 0, 0)
-        lay.addWidget(self.bar, 2)
-        lay.addWidget(self.label, 3)
-        self.reset()
-
-    def reset(self) -> None:
-        self._origin: tuple[float, int] | None = None
-        self.seconds_left: float | None = None
-        self.label.setText("")
-
-    def update_progress(self, step: int, total: int, message: str) -> None:
-        """Slot for ``Job.progress``."""
-        now = self.clock()
-        if self._origin is None and message.startswith("capturing"):
-            self._origin = (now, int(step))
-        total = max(int(total), int(step), 1)
-        self.bar.setRange(0, total)
-        self.bar.setValue(int(step))
-        self.bar.setFormat(f"{int(step)} / {total} {self.unit}")
-        self.seconds_left = None
-        if self._origin is not None:
-            t0, s0 = self._origin
-            if step > s0 and now > t0:
-                self.seconds_left = (total - step) * (now - t0) / (step - s0)
-        left = "" if self.seconds_left is None else f" · about {format_duration(self.seconds_left)} left"
-        self.label.setText(f"{message}{left}")
-
-    def set_note(self, text: str) -> None:
-        """Replace the label (paused, cancelled, done)."""
-        self.label.setText(text)

@@ -1,37 +1,49 @@
-"""The app's only threads: a latest-request-wins preview worker and a long-job runner.
+"""The app's one home for threads, long jobs, their progress and their waits.
+
+(About 530 lines: issue 12 asks for one module holding every job, wait and progress display.)
 
 Engine and device calls stay synchronous; they take ``progress(step, total, message)`` and
 ``should_stop()`` (see :mod:`engine.progress`). This module runs them off the UI thread and
 brings results back as Qt signals, delivered on the UI thread by queued connections.
 
-- :class:`LatestWorker` (live preview, napari's status-checker pattern): one background thread,
-  a queue of length one. A new request replaces the pending one; the one being computed
-  finishes and is delivered; the receiver drops anything older than what it shows.
-  ``synchronous=True`` computes inside :meth:`LatestWorker.submit` (tests, benchmarks).
-- :class:`Job` (calibration, acquisition, decomposition, export): ``fn(progress=,
-  should_stop=)`` on a thread, with ``progress``/``finished``/``failed``/``cancelled``
-  signals, pause (``should_stop`` blocks while paused) and cancel (``should_stop`` returns
-  True; the engine raises :class:`~engine.errors.Cancelled`).
-- :class:`UiCaller` / :func:`on_ui_thread`: a worker asks the UI thread to do something (show a
-  projector frame in a Qt window) and waits until it is done.
+- :class:`LatestWorker` (live preview, live camera view; napari's status-checker pattern): one
+  background thread, a queue of length one. A new request replaces the pending one; the one
+  being computed finishes and is delivered; ``synchronous=True`` computes inside
+  :meth:`LatestWorker.submit` (tests, benchmarks).
+- :class:`Job` (opening, saving, calibration, acquisition, noise reduction, export):
+  ``fn(progress=, should_stop=)`` on a thread, with ``progress``/``finished``/``failed``/
+  ``cancelled``/``ended`` signals, pause (``should_stop`` blocks while paused) and cancel
+  (``should_stop`` returns True; the engine raises :class:`~engine.errors.Cancelled`);
+  :meth:`Job.wait` is the only way the UI thread waits for one.
+- :class:`JobProgress`: the one progress display (message, bar with count, time left by
+  :class:`app.model.progress.TimeLeft`, Pause and Cancel) — in the status bar, the acquisition
+  dock and the calibration wizard alike.
+- :class:`UiCaller` / :class:`on_ui_thread`: a worker asks the UI thread to do something (show a
+  projector frame in a Qt window) and waits until it is done; :func:`run_on_rig` is the body of
+  every job that drives a rig (its lock, its projector on the UI thread).
+
+superqt is not used: its ``ensure_main_thread`` re-raises the callable's exception inside a
+slot on the UI thread (an exception escaping a Qt slot) and leaves the waiting worker to time
+out, and its thread workers pause and abort through generators, not the engine's
+``progress``/``should_stop`` callbacks.
 """
 
 from __future__ import annotations
 
 import itertools
 import threading
+import time
 import traceback
+import weakref
 from collections.abc import Callable
 from typing import Any
 
-from PySide6.QtCore import QCoreApplication, QObject, Qt, QThread, Signal, Slot
+from PySide6.QtCore import QCoreApplication, QEventLoop, QObject, Qt, QThread, Signal, Slot
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QProgressBar, QPushButton, QSizePolicy, QVBoxLayout, QWidget
 
+from app.model.progress import TimeLeft, format_duration
 from engine.errors import Cancelled
-
-
-def _on_ui_thread() -> bool:
-    app = QCoreApplication.instance()
-    return app is None or QThread.currentThread() is app.thread()
+from engine.progress import checkpoint
 
 
 class LatestWorker(QObject):
@@ -290,6 +302,21 @@ class Job(QObject):
             return not self._thread.is_alive()
         return True
 
+    def wait(self, timeout: float = 60.0, *, cancel: bool = False) -> bool:
+        """Wait on the UI thread until the job has ended (its ``ended`` delivered), serving events.
+
+        Events are processed meanwhile, so a worker blocked on a UI-thread call (a projector
+        frame) can finish. With ``cancel`` the job is asked to stop first (at its next
+        ``should_stop()``). Returns True once it has ended (False after ``timeout`` seconds).
+        """
+        if cancel:
+            self.cancel()
+        deadline = time.monotonic() + float(timeout)
+        while self._running and time.monotonic() < deadline:
+            QCoreApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 20)
+            self.join(0.005)
+        return not self._running
+
     # ------------------------------------------------------------------ worker side
     def should_stop(self) -> bool:
         """For ``fn``: blocks while paused; True once cancelled."""
@@ -297,8 +324,8 @@ class Job(QObject):
         return self._stop.is_set()
 
     def report(self, step: int, total: int, message: str) -> None:
-        """For ``fn``: progress callback."""
-        if self.synchronous or _on_ui_thread():
+        """For ``fn``: progress callback (direct on the job's own thread, queued from any other)."""
+        if self.synchronous or QThread.currentThread() is self.thread():
             self.progress.emit(int(step), int(total), str(message))
         else:
             self._progress.emit(int(step), int(total), str(message))
@@ -325,3 +352,181 @@ class Job(QObject):
             self.paused.emit(False)
         getattr(self, kind).emit(value)
         self.ended.emit()
+
+
+# ---------------------------------------------------------------------------------- rigs
+_LOCKS: weakref.WeakKeyDictionary[object, threading.Lock] = weakref.WeakKeyDictionary()
+_LOCKS_GUARD = threading.Lock()
+
+
+def rig_lock(rig) -> threading.Lock:
+    """The lock a thread holds while it drives ``rig`` (live view, calibration, acquisition).
+
+    Worker threads take it; the UI thread never waits on it (a live-view grab that finds it
+    taken skips its frame).
+    """
+    with _LOCKS_GUARD:
+        lock = _LOCKS.get(rig)
+        if lock is None:
+            lock = _LOCKS[rig] = threading.Lock()
+        return lock
+
+
+class _WorkerRig:
+    """A rig as a worker thread sees it: ``projector`` calls run on the UI thread."""
+
+    def __init__(self, rig, caller: UiCaller):
+        self._rig = rig
+        self.projector = on_ui_thread(rig.projector, caller)
+
+    def __getattr__(self, name):
+        return getattr(self._rig, name)
+
+
+def worker_rig(rig, caller: UiCaller):
+    """Wrap ``rig`` for a worker: projector methods marshalled to the UI thread by ``caller``.
+
+    A projector may be a Qt window (``devices.qtscreen``), which only the UI thread may drive;
+    the worker waits until the frame is shown. Everything else (camera, names) passes through.
+    """
+    return _WorkerRig(rig, caller)
+
+
+def run_on_rig(fn: Callable, rig, *args, caller: UiCaller, progress=None, should_stop=None, **kwargs):
+    """Job body of every rig job: take the rig's lock (still cancellable while waiting for it),
+    then ``fn(worker_rig(rig), *args, progress=, should_stop=, **kwargs)``."""
+    lock = rig_lock(rig)
+    while not lock.acquire(timeout=0.05):
+        checkpoint(should_stop, "waiting for the rig")
+    try:
+        return fn(worker_rig(rig, caller), *args, progress=progress, should_stop=should_stop, **kwargs)
+    finally:
+        lock.release()
+
+
+# ---------------------------------------------------------------------------------- progress
+class JobProgress(QWidget):
+    """The progress of a :class:`Job`: message and time left, a bar reading "12 / 41 captures",
+    Pause/Resume and Cancel.
+
+    Parameters
+    ----------
+    name : str
+        objectName prefix: the children are ``{name}_message``, ``{name}_bar``, ``{name}_pause``
+        and ``{name}_cancel`` (see docs/ui.md).
+    unit : str
+        What a step is ("captures", "steps"); empty: the bar shows a percentage.
+    stacked : bool
+        The message under the bar (narrow docks) instead of beside it.
+    hide_when_idle : bool
+        Shown only while a job runs (the status bar).
+    buttons : bool
+        Lay Pause and Cancel out beside the bar (False: the owner places them).
+    clock : callable
+        For :class:`~app.model.progress.TimeLeft` (tests pass a fake one).
+    """
+
+    def __init__(self, name: str, *, unit: str = "", stacked: bool = False, hide_when_idle: bool = False,
+                 buttons: bool = True, clock: Callable[[], float] = time.monotonic, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.setObjectName(name)
+        self.unit = unit
+        self.hide_when_idle = hide_when_idle
+        self.time_left = TimeLeft(clock=clock)
+        self.label = QLabel(objectName=f"{name}_message")
+        self.label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.label.setWordWrap(stacked)
+        self.bar = QProgressBar(objectName=f"{name}_bar")
+        self.bar.setTextVisible(True)
+        self.pause = QPushButton("Pause", objectName=f"{name}_pause", checkable=True)
+        self.cancel = QPushButton("Cancel", objectName=f"{name}_cancel")
+        controls = QHBoxLayout()
+        controls.setContentsMargins(0, 0, 0, 0)
+        controls.addWidget(self.bar, 1)
+        if buttons:  # else the owner lays :attr:`pause` and :attr:`cancel` out beside its own Start
+            controls.addWidget(self.pause)
+            controls.addWidget(self.cancel)
+        lay = QVBoxLayout(self) if stacked else QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        if stacked:
+            lay.addLayout(controls)
+            lay.addWidget(self.label)
+        else:
+            lay.addWidget(self.label, 3)
+            lay.addLayout(controls, 2)
+        self.job: Job | None = None
+        self.pause.toggled.connect(self._on_pause)
+        self.cancel.clicked.connect(self._on_cancel)
+        self.reset()
+
+    def reset(self, note: str = "") -> None:
+        """Idle: an empty bar, ``note`` as the message."""
+        self.time_left.reset()
+        self.bar.setRange(0, 1)
+        self.bar.setValue(0)
+        self.bar.setFormat(f"0 / 0 {self.unit}" if self.unit else "%p%")
+        self.label.setText(note)
+        self._set_paused(False)
+        self.pause.setEnabled(False)
+        self.cancel.setEnabled(False)
+        self.setVisible(not self.hide_when_idle)
+
+    def attach(self, job: Job, *, pausable: bool = True, cancellable: bool = True) -> None:
+        """Follow ``job`` until it ends; Pause and Cancel are shown only where the job honours them."""
+        self.reset(job.name + "…")
+        self.job = job
+        self.bar.setRange(0, 0)  # busy until the first report
+        self.pause.setVisible(pausable)
+        self.cancel.setVisible(cancellable)
+        self.pause.setEnabled(True)
+        self.cancel.setEnabled(True)
+        job.progress.connect(self.update_progress)
+        job.paused.connect(self._set_paused)
+        job.finished.connect(lambda _r: self._end("done"))
+        job.failed.connect(lambda exc: self._end(f"failed: {exc}"))
+        job.cancelled.connect(lambda _e: self._end("cancelled"))
+        self.show()
+
+    def update_progress(self, step: int, total: int, message: str) -> None:
+        """Slot for :attr:`Job.progress`."""
+        if total <= 0:
+            self.label.setText(message)
+            return
+        total = max(int(total), int(step), 1)
+        self.bar.setRange(0, total)
+        self.bar.setValue(int(step))
+        self.bar.setFormat(f"{int(step)} / {total} {self.unit}" if self.unit else "%p%")
+        seconds = self.time_left.update(step, total)
+        left = "" if seconds is None or step >= total else f" · about {format_duration(seconds)} left"
+        self.label.setText(f"{message}{left}")
+
+    @property
+    def seconds_left(self) -> float | None:
+        return self.time_left.seconds
+
+    def _on_pause(self, on: bool) -> None:
+        if self.job is not None:
+            self.job.pause() if on else self.job.resume()
+
+    def _on_cancel(self) -> None:
+        if self.job is not None:
+            self.job.cancel()
+
+    def _set_paused(self, on: bool) -> None:
+        self.pause.blockSignals(True)
+        self.pause.setChecked(on)
+        self.pause.blockSignals(False)
+        self.pause.setText("Resume" if on else "Pause")
+        if on:
+            self.label.setText("paused")
+
+    def _end(self, note: str) -> None:
+        self.job = None
+        self._set_paused(False)
+        self.pause.setEnabled(False)
+        self.cancel.setEnabled(False)
+        if self.bar.maximum() == 0:
+            self.bar.setRange(0, 1)
+        self.label.setText(note)
+        if self.hide_when_idle:
+            self.hide()

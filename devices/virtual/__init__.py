@@ -31,7 +31,7 @@ __all__ = ["open_rig", "probe", "VirtualRig", "Truth", "Components", "CameraMode
            "default_cache_dir", "scene_names", "load_scene"]
 
 _OPTIONS = ("ideal", "seed", "projector", "resolution", "projector_resolution", "ambient", "cache_dir",
-            "patch_size", "progress")
+            "patch_size", "supersample", "defocus", "progress")
 
 
 def default_cache_dir() -> Path:
@@ -48,15 +48,19 @@ class VirtualRig(Rig):
     camera : VirtualCamera
     projector : VirtualProjector
     targets : dict[str, (H, W) bool]
-        The scene's named targets rasterised into camera masks.
+        The scene's named targets rasterised into camera masks (pixel centres).
+    coverage : dict[str, (H, W) float32]
+        Fraction of each pixel's footprint on each target (0/1 unless pixels are supersampled):
+        the soft mask a perfect matting would give.
     truth : Truth
     scene : Scene
     setup : Setup
         The precomputed transport (for tests and benchmarks).
     """
 
-    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer):
-        super().__init__(name, camera, projector, targets=targets, truth=truth)
+    def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer, coverage=None, fingerprint=None):
+        super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
+        self.coverage = dict(coverage or {})
         self._renderer = renderer
         self.scene: Scene = renderer.scene
         self.setup: Setup = renderer.setup
@@ -108,7 +112,13 @@ def open_rig(arg: str, **options) -> VirtualRig:
         ``projector.offset`` pose (needs calibration; some pixels are shadowed or unlit).
     resolution : (H, W), default (256, 256)
         Camera resolution.
-    projector_resolution : (Hp, Wp), default = ``resolution``
+    projector_resolution : (Hp, Wp), default ``resolution`` (ideal) or half of it (realistic)
+        A real projector has fewer pixels than the camera that watches it.
+    supersample : int, default 1 (ideal) or 4 (realistic)
+        Sub-samples per pixel edge on pixels whose footprint may hold two surfaces, texture
+        cells or shadow states: edges are mixed as on a sensor (1: one point per pixel).
+    defocus : float, default 0
+        Projector blur on the surfaces, the standard deviation in projector pixels.
     ambient : bool, default True
         Ambient light on at start (``rig.ambient`` switches it later).
     cache_dir : str, Path, None or False, default None
@@ -148,7 +158,15 @@ def open_rig(arg: str, **options) -> VirtualRig:
     if kind == "offset" and scene.projector_offset is None:
         raise InputError(f"scene {scene.name!r} has no projector.offset pose; use projector='coaxial'")
     res = _resolution(options.get("resolution", (256, 256)), "resolution")
-    pres = _resolution(options.get("projector_resolution", res), "projector_resolution")
+    half = res if ideal else (max(4, res[0] // 2), max(4, res[1] // 2))
+    pres = _resolution(options.get("projector_resolution", half), "projector_resolution")
+    sub = options.get("supersample", 1 if ideal else 4)
+    if isinstance(sub, bool) or not isinstance(sub, (int, np.integer)) or not 1 <= sub <= 16:
+        raise InputError(f"supersample must be an integer in [1, 16] (sub-samples per pixel edge), got {sub!r}")
+    defocus = options.get("defocus", 0.0)
+    if (isinstance(defocus, bool) or not isinstance(defocus, (int, float)) or not np.isfinite(defocus)
+            or not 0 <= defocus <= 64):
+        raise InputError(f"defocus must be a blur in [0, 64] projector pixels, got {defocus!r}")
     patch = options.get("patch_size", None)
     if patch is None:
         patch = scene.patch_size
@@ -162,9 +180,10 @@ def open_rig(arg: str, **options) -> VirtualRig:
     elif not isinstance(cache, (str, os.PathLike)):
         raise InputError(f"cache_dir must be a path, None or False, got {cache!r}")
 
-    setup = load_or_build(scene, Geometry(res, kind, pres, float(patch)), None if cache is None else Path(cache),
+    geometry = Geometry(res, kind, pres, float(patch), int(sub))
+    setup = load_or_build(scene, geometry, None if cache is None else Path(cache),
                           progress=options.get("progress"))
-    renderer = Renderer(scene, setup)
+    renderer = Renderer(scene, setup, defocus=float(defocus))
     renderer.ambient = ambient
     pmodel = ProjectorModel.perfect() if ideal else ProjectorModel.realistic()
     cmodel = CameraModel.perfect() if ideal else CameraModel.realistic()
@@ -172,21 +191,35 @@ def open_rig(arg: str, **options) -> VirtualRig:
     name = f"virtual:{arg}"
     camera = VirtualCamera(renderer, projector, cmodel, np.random.default_rng(seed), name)
     truth = Truth(renderer, pmodel, cmodel, pres)
-    return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer)
+    fingerprint = {"scene": scene.digest, "projector pose": kind, "ideal": ideal, "patch size": float(patch),
+                   "supersample": int(sub), "defocus": float(defocus)}
+    return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer,
+                      coverage=target_coverage(scene, setup), fingerprint=fingerprint)
+
+
+def _on_target(pieces, quad, a, b) -> np.ndarray:
+    m = np.zeros(len(quad), bool)
+    for q, (a0, b0, a1, b1) in pieces:
+        m |= (quad == q) & (a >= a0) & (a <= a1) & (b >= b0) & (b <= b1)
+    return m
 
 
 def target_masks(scene: Scene, setup: Setup) -> dict[str, np.ndarray]:
-    """Rasterise the scene's targets into camera masks ``{name: (H, W) bool}``."""
+    """Rasterise the scene's targets into camera masks ``{name: (H, W) bool}`` (pixel centres)."""
     h, w = (int(x) for x in setup.resolution)
     n = h * w
     quad, a, b = setup.pixel_quad, setup.a[:n], setup.b[:n]
-    out = {}
-    for name, pieces in scene.targets.items():
-        m = np.zeros(n, bool)
-        for q, (a0, b0, a1, b1) in pieces:
-            m |= (quad == q) & (a >= a0) & (a <= a1) & (b >= b0) & (b <= b1)
-        out[name] = m.reshape(h, w)
-    return out
+    return {name: _on_target(pieces, quad, a, b).reshape(h, w) for name, pieces in scene.targets.items()}
+
+
+def target_coverage(scene: Scene, setup: Setup) -> dict[str, np.ndarray]:
+    """Fraction of each pixel's footprint on each named target ``{name: (H, W) float32}``."""
+    h, w = (int(x) for x in setup.resolution)
+    n, vis = h * w, setup.n_visible
+    quad = np.concatenate([setup.pixel_quad, setup.quad[n:vis]])
+    a, b = setup.a[:vis], setup.b[:vis]
+    return {name: setup.pixel_values(_on_target(pieces, quad, a, b).astype(np.float32)).reshape(h, w)
+            for name, pieces in scene.targets.items()}
 
 
 def _no_scene():

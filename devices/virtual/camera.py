@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,6 +66,22 @@ class CameraModel:
     def perfect(cls) -> CameraModel:
         """The ideal camera: returns the radiance exactly, clipping only at 1e12 electrons."""
         return cls(black_level=0.0, read_noise=0.0, bits=64, full_well=1e12, ideal=True)
+
+    def full_scale(self, exposure: float, gain: float) -> float:
+        """Radiance at which a pixel clips at ``exposure`` and ``gain`` (``inf`` for the ideal camera,
+        whose 1e12-electron well no scene reaches: it returns radiance at any exposure).
+
+        Examples
+        --------
+        >>> m = CameraModel.realistic()
+        >>> round(m.full_scale(0.01, 1.0), 4)  # the ADC's white level comes before the full well here
+        4.9597
+        """
+        if self.ideal:
+            return float("inf")
+        well = self.full_well
+        adc = (self.white_level - self.black_level) * self.electrons_per_dn / gain
+        return min(well, adc) / (self.electrons_per_radiance * exposure)
 
     @property
     def calibration(self) -> float:
@@ -176,8 +193,13 @@ class VirtualCamera:
         Linear gain, >= 1 (validated when set).
     model : CameraModel
     rng : numpy.random.Generator
+        Noise of frames without an identity (live view); its seed also seeds identified frames.
     captures : int
         Number of frames taken.
+    frame_identity : str or None
+        Set by :class:`engine.acquire.Recorder` before a frame (capture name, pattern, frame
+        index): that frame's noise is seeded from the rig's seed and it, never from the
+        process (:attr:`engine.rig.Camera.frame_identity`).
     """
 
     def __init__(self, renderer, projector, model: CameraModel, rng: np.random.Generator, name: str):
@@ -190,6 +212,7 @@ class VirtualCamera:
         self._exposure = 1.0 / 30.0
         self._gain = 1.0
         self.captures = 0
+        self.frame_identity: str | None = None
 
     @property
     def exposure(self) -> float:
@@ -225,7 +248,7 @@ class VirtualCamera:
             calibration constant), ``saturated`` clipped pixels, metadata.
         """
         radiance = self._renderer.render(self._projector.emitted)
-        raw, saturated = self.model.expose(radiance, self._exposure, self._gain, self.rng)
+        raw, saturated = self.model.expose(radiance, self._exposure, self._gain, self._frame_rng())
         if self.model.ideal:
             image = np.asarray(radiance, np.float32)
             if saturated.any():
@@ -239,7 +262,20 @@ class VirtualCamera:
                 "electrons_per_dn": self.model.electrons_per_dn,
                 "noise": self.model.noise(self._exposure, self._gain)}
         return Frame(image=image, exposure=self._exposure, gain=self._gain,
-                     black_level=self.model.black_level, saturated=saturated, metadata=meta)
+                     black_level=self.model.black_level, saturated=saturated, metadata=meta,
+                     full_scale=self.model.full_scale(self._exposure, self._gain))
+
+    def _frame_rng(self) -> np.random.Generator:
+        """The noise of this frame: from the rig's seed and :attr:`frame_identity` when the recorder set one.
+
+        The identity is used once; frames without one (a live view) draw from :attr:`rng`.
+        """
+        identity, self.frame_identity = self.frame_identity, None
+        if identity is None:
+            return self.rng
+        words = np.frombuffer(hashlib.sha256(identity.encode()).digest(), np.uint32)
+        seed = self.rng.bit_generator.seed_seq
+        return np.random.default_rng(np.random.SeedSequence(seed.entropy, spawn_key=(*seed.spawn_key, *words)))
 
     def __repr__(self) -> str:
         return f"VirtualCamera({self.resolution}, ideal={self.model.ideal})"

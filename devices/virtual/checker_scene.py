@@ -2,11 +2,12 @@
 
 A 1 m box open towards the camera — red-ish left wall, blue-ish right wall, grey floor, back
 wall and ceiling, a ceiling lamp — with a ColorChecker Classic (24 patch quads on a black
-card) on the back wall and a painted panel under it, both facing the co-axial projector.
-Patch albedos are :func:`engine.checker.reference_reflectances`: the chart's published
-reflectances integrated over the virtual camera's channels, so the scene's truth is
-colour-science's data. Run ``python -m devices.virtual.checker_scene`` to rewrite the JSON
-after changing this file (a test checks that they agree).
+card) on the back wall and a painted panel under it, both facing the co-axial projector (an
+offset pose beside the camera is there too). Patch albedos are
+:func:`engine.checker.reference_reflectances`: the chart's published reflectances integrated
+over the virtual camera's channels, so the scene's truth is colour-science's data. Run
+``python -m devices.virtual.checker_scene`` to rewrite the JSON after changing this file (a
+test checks that they agree).
 """
 
 from __future__ import annotations
@@ -61,7 +62,10 @@ def checker_scene() -> dict:
                        "channels) and an orange panel (albedo (0.55, 0.32, 0.18)) on the back wall of a 1 m box "
                        "with coloured side walls and a ceiling lamp; chart and panel face the co-axial projector.",
         "camera": {"position": [0.5, 0.5, -0.9], "look_at": [0.5, 0.5, 0.5], "up": [0, 1, 0], "fov_deg": 40.0},
-        "projector": {"power": [4.0, 4.0, 4.0]},
+        # beside the camera, 25 cm left and 10 cm up: the chart and the panel no longer get equal light
+        "projector": {"power": [4.0, 4.0, 4.0],
+                      "offset": {"position": [0.25, 0.6, -0.85], "look_at": [0.5, 0.5, 0.5], "up": [0, 1, 0],
+                                 "fov_deg": 44.0}},
         "surfaces": surfaces,
         "targets": {
             "panel": [{"surface": "panel"}],

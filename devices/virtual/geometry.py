@@ -127,6 +127,19 @@ class View:
         d = cam @ self.rotation
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
+    def sub_pixel_directions(self, pixels: np.ndarray, sub: int) -> np.ndarray:
+        """(len(pixels) * sub**2, 3) unit ray directions through a ``sub x sub`` grid of
+        points inside each of the row-major ``pixels``, pixel by pixel."""
+        h, w = self.resolution
+        i, j = np.divmod(np.asarray(pixels, np.int64), w)
+        off = (np.arange(sub) + 0.5) / sub - 0.5
+        oy, ox = np.meshgrid(off, off, indexing="ij")
+        x = (j[:, None] + ox.ravel()[None, :]).ravel()
+        y = (i[:, None] + oy.ravel()[None, :]).ravel()
+        cam = np.stack([(x - self.cx) / self.fx, (y - self.cy) / self.fy, np.ones(x.size)], axis=1)
+        d = cam @ self.rotation
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project world points.
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from devices.virtual.scene import Scene
@@ -16,6 +17,9 @@ class Renderer:
     ----------
     scene : Scene
     setup : Setup
+    defocus : float
+        Projector blur: the emitted image is blurred by a Gaussian of this standard deviation
+        (projector pixels) before it reaches the surfaces (0: in focus).
 
     Attributes
     ----------
@@ -26,23 +30,27 @@ class Renderer:
     ambient_light : (Ns, 3) float64
         Direct light (irradiance / pi) from the ambient (emitting) quads.
     emission : (H*W, 3) float64
-        Radiance emitted towards the camera at pixels that see a light.
+        Radiance emitted towards the camera at pixels that see a light (mixed pixels: the
+        mean over their sub-samples).
     ambient : bool
         Whether the ambient light is on (the rig's switch; captures read it).
     """
 
-    def __init__(self, scene: Scene, setup: Setup):
+    def __init__(self, scene: Scene, setup: Setup, *, defocus: float = 0.0):
         self.scene = scene
         self.setup = setup
+        self.defocus = float(defocus)
         h, w = (int(x) for x in setup.resolution)
         self.shape = (h, w)
-        live = setup.quad >= 0
-        self.rho = np.where(live[:, None], scene.albedo[np.maximum(setup.quad, 0)], 0.0)
+        self.rho = scene.albedo_at(setup.quad, setup.a, setup.b)
         self.base = Resolvent(setup, self.rho)
         self.ambient_light = setup.light_ff @ scene.emission[setup.light_quads] if len(setup.light_quads) \
             else np.zeros((len(setup.quad), 3))
-        pq = setup.pixel_quad
-        self.emission = np.where((pq >= 0)[:, None], scene.emission[np.maximum(pq, 0)], 0.0)
+        vq = setup.quad[:setup.n_visible]
+        seen = np.where((vq >= 0)[:, None], scene.emission[np.maximum(vq, 0)], 0.0)
+        pq = setup.pixel_quad  # a mixed pixel's centre sample is inert: take what it sees
+        seen[:self.n_pixels] = np.where((pq >= 0)[:, None], scene.emission[np.maximum(pq, 0)], 0.0)
+        self.emission = setup.pixel_values(seen)
         self.ambient = True
         # every sample gathers from one projector pixel (pixel 0 with gain 0 where unlit)
         self._proj_index = np.where(setup.proj_lit, setup.proj_index, 0).astype(np.intp)
@@ -74,7 +82,10 @@ class Renderer:
         amb, gain = (self._cache32[0], self._cache32[1]) if f32 else (self.ambient_light, self._proj_gain)
         if emitted is None:
             return amb.copy() if ambient else np.zeros(amb.shape, amb.dtype)
-        flat = np.asarray(emitted).reshape(-1, 3)
+        emitted = np.asarray(emitted)
+        if self.defocus > 0:
+            emitted = cv2.GaussianBlur(emitted.astype(np.float32), (0, 0), self.defocus, borderType=cv2.BORDER_CONSTANT)
+        flat = emitted.reshape(-1, 3)
         e = np.take(flat, self._proj_index, axis=0).astype(amb.dtype, copy=False)
         e *= gain
         if ambient:
@@ -82,8 +93,9 @@ class Renderer:
         return e
 
     def to_image(self, radiance: np.ndarray, *, ambient: bool) -> np.ndarray:
-        """Camera image ``(H, W, 3)`` from sample radiance (adds the lights seen if on)."""
-        img = radiance[:self.n_pixels]
+        """Camera image ``(H, W, 3)`` from sample radiance (adds the lights seen if on); a mixed
+        pixel is the mean of its sub-samples."""
+        img = self.setup.pixel_values(radiance)
         if ambient:
             em = self._cache32[2] if radiance.dtype == np.float32 else self.emission
             img = img + em

@@ -4,9 +4,12 @@ The set-up turns a :class:`~devices.virtual.scene.Scene` and the rig's geometry 
 the arrays every capture reuses:
 
 * **samples** — one per camera pixel (index ``i * W + j``; pixels that see no front surface
-  are inert samples of albedo 0), followed by *hidden* samples: a regular grid on every quad,
-  kept only where the camera does not see the surface. Each sample has a point, a quad, local
-  coordinates and an area.
+  are inert samples of albedo 0); then, when pixels are supersampled, ``s * s`` *sub-samples*
+  for each *mixed* pixel — one whose 8-neighbourhood changes surface, texture cell or
+  projector shadow, so that its footprint may hold two of them (its centre sample is then
+  inert and the pixel is the mean of its sub-samples, as a sensor averages its footprint);
+  then *hidden* samples: a regular grid on every quad, kept only where the camera does not
+  see the surface. Each sample has a point, a quad, local coordinates and an area.
 * **patches** — each quad cut into a grid of cells about ``patch_size`` wide. The patch
   radiance is the area-weighted mean of its samples' radiance: ``B = Mavg L``.
 * **form factors** — ``Gn[m, j]``: from node ``m`` (a vertex of the patch grid) to patch
@@ -33,9 +36,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
-import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -44,9 +45,13 @@ import scipy.sparse as sp
 
 from devices.virtual.geometry import Quads, View, blocker_table, cast_rays, occluded, polygon_form_factor, quad_corners
 from devices.virtual.scene import Scene
+from engine.errors import InputError
+from engine.imageio import atomic_write
 from engine.progress import report
 
-MODEL_VERSION = 8
+MODEL_VERSION = 9
+#: Most patches a scene may be cut into: their transport is dense in patches (memory ~ patches²).
+MAX_PATCHES = 8000
 
 # Shadow rays per edge of a patch (form factors) and of a light (ambient light).
 VIS_SAMPLES = 3
@@ -66,6 +71,7 @@ class Geometry:
     projector: str
     projector_resolution: tuple[int, int]
     patch_size: float
+    supersample: int = 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,6 +121,11 @@ class Setup:
     pixel_quad : (H*W,) int64
         Quad seen by each pixel (front side), -1 for none.
     resolution, projector_resolution : (2,) int64
+    sub_pixel : (M,) int64
+        The mixed pixels, in increasing order; the sub-samples of ``sub_pixel[m]`` are
+        samples ``H*W + m*S .. H*W + (m+1)*S - 1`` with ``S = supersample**2``.
+    supersample : int
+        Sub-samples per pixel edge (1: one sample per pixel, no mixed pixels).
     rescaled_rows : int
         Number of patch-centre form-factor rows whose sum exceeded 1 by discretisation and
         were scaled back to 1 (energy conservation); 0 for convex enclosures.
@@ -142,12 +153,34 @@ class Setup:
     pixel_quad: np.ndarray
     resolution: np.ndarray
     projector_resolution: np.ndarray
+    sub_pixel: np.ndarray
+    supersample: int
     rescaled_rows: int
 
     @property
     def n_pixels(self) -> int:
         """``H * W``."""
         return int(self.resolution[0] * self.resolution[1])
+
+    @property
+    def n_visible(self) -> int:
+        """Samples the camera sees: pixel centres, then the sub-samples of mixed pixels."""
+        return self.n_pixels + len(self.sub_pixel) * int(self.supersample) ** 2
+
+    def pixel_values(self, values: np.ndarray) -> np.ndarray:
+        """Per-pixel ``(H*W, ...)`` values from per-sample ones: mixed pixels average their sub-samples."""
+        n = self.n_pixels
+        out = values[:n].copy()
+        m = len(self.sub_pixel)
+        if m:
+            per = int(self.supersample) ** 2
+            out[self.sub_pixel] = values[n:n + m * per].reshape((m, per) + values.shape[1:]).mean(axis=1)
+        return out
+
+    def sample_pixel(self) -> np.ndarray:
+        """(n_visible,) int64: the camera pixel of every visible sample."""
+        per = int(self.supersample) ** 2
+        return np.concatenate([np.arange(self.n_pixels), np.repeat(self.sub_pixel, per)]).astype(np.int64)
 
 
 def views(scene: Scene, geometry: Geometry) -> tuple[View, View]:
@@ -165,9 +198,22 @@ def views(scene: Scene, geometry: Geometry) -> tuple[View, View]:
 
 
 def patch_grid(scene: Scene, patch_size: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Patch counts along ``u`` and ``v`` of every quad, and each quad's first patch index."""
-    nu = np.maximum(1, np.ceil(np.linalg.norm(scene.quads.u, axis=1) / patch_size - 1e-9)).astype(np.int64)
-    nv = np.maximum(1, np.ceil(np.linalg.norm(scene.quads.v, axis=1) / patch_size - 1e-9)).astype(np.int64)
+    """Patch counts along ``u`` and ``v`` of every quad, and each quad's first patch index.
+
+    Raises
+    ------
+    InputError
+        More than :data:`MAX_PATCHES` patches (their transport would not fit in memory); the
+        message gives the smallest patch size that fits.
+    """
+    fu = np.maximum(1.0, np.ceil(np.linalg.norm(scene.quads.u, axis=1) / patch_size - 1e-9))
+    fv = np.maximum(1.0, np.ceil(np.linalg.norm(scene.quads.v, axis=1) / patch_size - 1e-9))
+    count = float(np.sum(fu * fv))
+    if count > MAX_PATCHES:
+        fits = patch_size * np.sqrt(count / MAX_PATCHES)
+        raise InputError(f"patch_size {patch_size:g} m cuts scene {scene.name!r} into {count:.3g} patches; at most "
+                         f"{MAX_PATCHES} fit in memory: use a patch_size of at least {fits:.2g} m")
+    nu, nv = fu.astype(np.int64), fv.astype(np.int64)
     offset = np.concatenate([[0], np.cumsum(nu * nv)])
     return nu, nv, offset
 
@@ -197,7 +243,7 @@ def load_or_build(scene: Scene, geometry: Geometry, cache_dir: Path | None, *, p
               "samples": [VIS_SAMPLES, LIGHT_SAMPLES, HIDDEN_PER_PATCH]}
     ff_key = _key(common)
     key = _key(dict(common, resolution=list(geometry.resolution), projector=geometry.projector,
-                    projector_resolution=list(geometry.projector_resolution)))
+                    projector_resolution=list(geometry.projector_resolution), supersample=int(geometry.supersample)))
     stem = re.sub(r"[^A-Za-z0-9_.-]", "_", scene.name)[:64]  # never a path outside cache_dir
     path = Path(cache_dir) / f"{stem}-{key}.npz"
     ff_path = Path(cache_dir) / f"{stem}-ff-{ff_key}.npz"
@@ -218,18 +264,16 @@ def _key(obj) -> str:
 
 
 def _save_arrays(path: Path, arrays: dict) -> None:
-    """Write ``arrays`` to ``path`` atomically (temp file + rename); failures only cost time."""
+    """Write ``arrays`` to ``path`` atomically (:func:`engine.imageio.atomic_write`); failures only cost time."""
     arrays = dict(arrays, version=np.array(MODEL_VERSION))
+
+    def writer(temp: Path) -> None:
+        with open(temp, "wb") as fh:
+            np.savez(fh, **arrays)
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(path, writer)
     except OSError:
         pass
 
@@ -324,6 +368,7 @@ def _load(path: Path) -> Setup | None:
             else:
                 kw[f.name] = z[f.name]
         kw["rescaled_rows"] = int(kw["rescaled_rows"])
+        kw["supersample"] = int(kw["supersample"])
         return Setup(**kw)
     except Exception:  # inconsistent arrays: rebuild
         return None
@@ -362,6 +407,31 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     cos_view = np.abs(np.einsum("ij,ij->i", dirs, normal[np.maximum(pixel_quad, 0)]))
     omega = camera.pixel_solid_angle_factor(dirs) / (camera.fx * camera.fy)
     pix_area = np.where(pix_ok, omega * t**2 / np.maximum(cos_view, 1e-3), 0.0)
+    pix_a, pix_b = np.where(pix_ok, hits.a, 0.0), np.where(pix_ok, hits.b, 0.0)
+
+    # --- mixed pixels and their sub-samples -------------------------------------------------
+    sub = int(geometry.supersample)
+    per = sub * sub
+    if sub > 1:
+        mixed = _mixed_pixels(scene, camera, projector, pixel_quad, pix_a, pix_b, pix_points, (h, w))
+        sdirs = camera.sub_pixel_directions(mixed, sub)
+        shits = cast_rays(camera.position, sdirs, quads)
+        s_ok = (shits.quad >= 0) & shits.front
+        s_quad = np.where(s_ok, shits.quad, -1)
+        s_t = np.where(s_ok, shits.t, 0.0)
+        s_points = camera.position + s_t[:, None] * sdirs
+        s_cos = np.abs(np.einsum("ij,ij->i", sdirs, normal[np.maximum(s_quad, 0)]))
+        s_omega = camera.pixel_solid_angle_factor(sdirs) / (camera.fx * camera.fy * per)
+        s_area = np.where(s_ok, s_omega * s_t**2 / np.maximum(s_cos, 1e-3), 0.0)
+        s_a, s_b = np.where(s_ok, shits.a, 0.0), np.where(s_ok, shits.b, 0.0)
+    else:
+        mixed = np.zeros(0, np.int64)
+        s_quad, s_points, s_area = np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+        s_a = s_b = np.zeros(0)
+    # a mixed pixel's centre sample is inert: its sub-samples stand for it
+    centre_quad = pixel_quad.copy()
+    centre_quad[mixed] = -1
+    n_vis = h * w + len(s_quad)
 
     # --- hidden samples ------------------------------------------------------------------
     nu, nv, offset = patch_grid(scene, geometry.patch_size)
@@ -384,11 +454,11 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     keep = ~seen
     hq, ha, hb, harea, hpoints = hq[keep], ha[keep], hb[keep], harea[keep], hpoints[keep]
 
-    quad = np.concatenate([pixel_quad, hq])
-    a = np.concatenate([np.where(pix_ok, hits.a, 0.0), ha])
-    b = np.concatenate([np.where(pix_ok, hits.b, 0.0), hb])
-    points = np.concatenate([pix_points, hpoints])
-    area = np.concatenate([pix_area, harea])
+    quad = np.concatenate([centre_quad, s_quad, hq])
+    a = np.concatenate([pix_a, s_a, ha])
+    b = np.concatenate([pix_b, s_b, hb])
+    points = np.concatenate([pix_points, s_points, hpoints])
+    area = np.concatenate([np.where(centre_quad >= 0, pix_area, 0.0), s_area, harea])
     live = quad >= 0
     qs = np.maximum(quad, 0)
     n_samples = len(quad)
@@ -443,12 +513,11 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     # projector is blocked; hidden samples: only where that pixel's own ray reaches their
     # quad (so a co-axial projector never lights what the camera cannot see)
     proj_index, inside = projector.nearest_pixel(points)
-    n_pix = h * w
     facing = np.einsum("ij,ij->i", projector.position - points, normal[qs]) > 0
     lit = inside & facing & live
-    cand = np.flatnonzero(lit[:n_pix])
+    cand = np.flatnonzero(lit[:n_vis])
     lit[cand] = ~occluded(points[cand], np.broadcast_to(projector.position, (cand.size, 3)), quads)
-    lit[n_pix:] &= _seen_by(projector, proj_pixel_quad, points[n_pix:], quad[n_pix:], normal)
+    lit[n_vis:] &= _seen_by(projector, proj_pixel_quad, points[n_vis:], quad[n_vis:], normal)
     to_p = projector.position - points
     dist = np.linalg.norm(to_p, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -466,7 +535,36 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
                  light_quads=light_quads, light_ff=light_ff, proj_index=proj_index, proj_lit=lit,
                  proj_factor=proj_factor, proj_xy=proj_xy, pixel_quad=pixel_quad,
                  resolution=np.array(geometry.resolution), projector_resolution=np.array(geometry.projector_resolution),
-                 rescaled_rows=rescaled)
+                 sub_pixel=mixed.astype(np.int64), supersample=sub, rescaled_rows=rescaled)
+
+
+def _mixed_pixels(scene: Scene, camera: View, projector: View, pixel_quad, a, b, points, shape) -> np.ndarray:
+    """Pixels whose footprint may hold two surfaces, texture cells or projector shadow states.
+
+    A pixel is mixed when a pixel of its 8-neighbourhood (itself included) differs from it
+    in the quad seen, the texture cell seen, or whether an unblocked ray reaches the
+    projector from the pixel's centre point.
+    """
+    h, w = shape
+    n = h * w
+    cell = np.full(n, -1, np.int64)
+    for q, tex in scene.textures.items():
+        sel = np.flatnonzero(pixel_quad == q)
+        cell[sel] = tex.cell(a[sel], b[sel])
+    normal = scene.quads.normal
+    qs = np.maximum(pixel_quad, 0)
+    _, inside = projector.nearest_pixel(points)
+    facing = np.einsum("ij,ij->i", projector.position - points, normal[qs]) > 0
+    lit = inside & facing & (pixel_quad >= 0)
+    cand = np.flatnonzero(lit)
+    lit[cand] = ~occluded(points[cand], np.broadcast_to(projector.position, (cand.size, 3)), scene.quads)
+    out = np.zeros((h, w), bool)
+    for key in (pixel_quad, cell, lit.astype(np.int64)):
+        k = np.pad(key.reshape(h, w), 1, mode="edge")
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                out |= k[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] != k[1:1 + h, 1:1 + w]
+    return np.flatnonzero(out.ravel())
 
 
 def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray, normal: np.ndarray) -> np.ndarray:

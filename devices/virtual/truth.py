@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from devices.virtual.camera import CameraModel
@@ -89,9 +90,39 @@ class Truth:
         return self._r.direct_light(self.projector_model.emit(pattern), ambient=bool(ambient), dtype=np.float64)
 
     def _pixels_to_samples(self, mask: np.ndarray) -> np.ndarray:
+        """The surface a camera mask stands for, as samples.
+
+        Pixel centres follow the mask. The sub-samples of a mixed pixel in or next to the
+        mask follow the *surfaces* the mask covers — quads with at least half of their
+        (unmixed) pixels painted — so that a target's edge is recolored where the target is,
+        whether or not the artist painted the mixed pixel, as on a real object.
+        """
+        s = self._r.setup
+        n = self._r.n_pixels
         sel = np.zeros(len(self._r.rho), bool)
-        sel[:self._r.n_pixels] = mask.ravel()
+        flat = mask.ravel()
+        sel[:n] = flat
+        if len(s.sub_pixel):
+            pq = np.where(s.quad[:n] >= 0, s.quad[:n], -1)  # unmixed pixels' quads
+            nq = len(self.scene.quads)
+            seen = np.bincount(pq[pq >= 0], minlength=nq)
+            painted = np.bincount(pq[(pq >= 0) & flat], minlength=nq)
+            owned = (seen > 0) & (painted >= 0.5 * seen)
+            near = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).ravel() > 0
+            vis = s.n_visible
+            sq = s.quad[n:vis]
+            sel[n:vis] = near[s.sample_pixel()[n:]] & (sq >= 0) & owned[np.maximum(sq, 0)]
         return sel
+
+    def coverage(self, mask: np.ndarray) -> np.ndarray:
+        """(H, W) float32: fraction of each pixel's footprint on the surface ``mask`` stands for.
+
+        1/0 on unmixed pixels (the mask itself); the fraction of sub-samples on the mask's
+        surfaces on mixed pixels (see :meth:`recolor`).
+        """
+        mask = check_mask("mask", mask, self.shape)
+        sel = self._pixels_to_samples(mask)[:self._r.setup.n_visible].astype(np.float64)[:, None]
+        return self._r.setup.pixel_values(sel)[:, 0].reshape(self.shape).astype(np.float32)
 
     def _image(self, radiance: np.ndarray, ambient: bool) -> np.ndarray:
         return self._r.to_image(radiance, ambient=bool(ambient)).astype(np.float32)
@@ -122,7 +153,8 @@ class Truth:
         pairs : sequence of (mask, kappa)
             ``mask`` (H, W) bool camera pixels, ``kappa`` scalar or (3,). Where masks overlap
             their kappas multiply. Only the camera-visible surface is recoloured (hidden parts
-            of the same surface keep their albedo), as in the paper.
+            of the same surface keep their albedo), as in the paper. On a supersampled rig a
+            mask also recolors the part of its surfaces seen in mixed pixels next to it.
         ambient, pattern
             As :meth:`photograph`.
 
@@ -180,7 +212,7 @@ class Truth:
         out = np.empty((n_terms + 1,) + self.shape + (3,), np.float32)
         out[0] = self._image(terms[0], ambient)
         for n in range(1, n_terms + 1):
-            out[n] = terms[n][:self._r.n_pixels].reshape(self.shape + (3,))
+            out[n] = self._r.to_image(terms[n], ambient=False)
         return out
 
     def components(self, mask: np.ndarray, order: int, *, ambient: bool = True,
@@ -231,10 +263,9 @@ class Truth:
         Paper Sec. 3.3: emitting ``L`` gives ``L_d = D L`` on the target, so emitting
         ``I / D`` (through the inverse response) makes the target's outgoing radiance ``I``.
         """
-        n = self._r.n_pixels
         ones = np.ones(self._proj_res + (3,))
-        e = self._r.direct_light(ones, ambient=False, dtype=np.float64)[:n]
-        d = (self._r.rho[:n] * e).reshape(self.shape + (3,))
+        e = self._r.direct_light(ones, ambient=False, dtype=np.float64)
+        d = self._r.to_image(self._r.rho * e, ambient=False)
         if mask is not None:
             mask = check_mask("mask", mask, self.shape)
             d = np.where(mask[..., None], d, 0.0)
@@ -249,11 +280,12 @@ class Truth:
             Projector pixel coordinates (x = column, y = row, pixel centres at integers) of
             the pixel's surface point; NaN where the pixel sees no surface.
         lit : (H, W) bool
-            The point is inside the projector's frustum, faces it and is not shadowed.
+            The point is inside the projector's frustum, faces it and is not shadowed (a
+            mixed pixel: at least half of its footprint is).
         """
         s = self._r.setup
         xy = s.proj_xy.reshape(self.shape + (2,)).astype(np.float32)
-        lit = s.proj_lit[:self._r.n_pixels].reshape(self.shape).copy()
+        lit = s.pixel_values(s.proj_lit[:s.n_visible].astype(np.float32)).reshape(self.shape) >= 0.5
         return xy, lit
 
     def emitters(self) -> np.ndarray:
@@ -267,4 +299,4 @@ class Truth:
 
     def albedo(self) -> np.ndarray:
         """(H, W, 3) float32 albedo of the surface seen at each pixel (0 where none)."""
-        return self._r.rho[:self._r.n_pixels].reshape(self.shape + (3,)).astype(np.float32)
+        return self._r.to_image(self._r.rho, ambient=False).astype(np.float32)

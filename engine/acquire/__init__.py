@@ -2,7 +2,7 @@
 and adaptive capture (Sec. 5). Everything talks to a rig through :class:`Recorder` only."""
 
 from engine.acquire.cascade import CascadeResult, acquire_cascade, acquire_single
-from engine.acquire.checker import CheckerMeasurement, measure_checker
+from engine.acquire.checker import CheckerMeasurement, measure_checker, projector_xy
 from engine.acquire.emission import Emission, Emitter, Negative
 from engine.acquire.predict import Adaptive, Policy, Predictor
 from engine.acquire.recorder import Recorder
@@ -29,5 +29,6 @@ __all__ = [
     "calibration_budget",
     "measure_checker",
     "prepare_target",
+    "projector_xy",
     "reemit",
 ]

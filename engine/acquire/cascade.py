@@ -31,6 +31,8 @@ from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
 from engine.recolor import recolor
+from engine.session.edit import mask_digest, mask_name
+from engine.session.paths import NAME
 from engine.trust import recolor_trusted
 
 
@@ -78,17 +80,18 @@ class _Measured(NamedTuple):
     image: np.ndarray
     noise: Noise | None
 
-    def __add__(self, other: "_Measured") -> "_Measured":
+    def __add__(self, other: _Measured) -> _Measured:
         both = self.noise is not None and other.noise is not None
         return _Measured(self.image + other.image, self.noise + other.noise if both else None)
 
-    def __sub__(self, other: "_Measured") -> "_Measured":
+    def __sub__(self, other: _Measured) -> _Measured:
         both = self.noise is not None and other.noise is not None
         return _Measured(self.image - other.image, self.noise - other.noise if both else None)
 
 
 class _Plan:
-    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix, shared):
+    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix,
+                 shared):
         self.recorder = recorder
         self.prepared = prepared
         self.kappas = kappas
@@ -108,7 +111,8 @@ class _Plan:
         # D's relative error per target: one noise source shared by every re-emission on it
         self.direct_noise = [
             None if p.direct_variance is None else
-            (f"D:{prefix}-{i}", np.where(p.mask[:, :, None], np.sqrt(p.direct_variance) / np.where(p.direct > 0, p.direct, 1), 0)
+            (f"D:{prefix}-{i}", np.where(p.mask[:, :, None],
+                                         np.sqrt(p.direct_variance) / np.where(p.direct > 0, p.direct, 1), 0)
              .astype(np.float32))
             for i, p in enumerate(prepared)
         ]
@@ -252,6 +256,21 @@ class _Plan:
         return _Measured(result.image, noise.merged(self.shared))
 
 
+def capture_stem(target: str, mask) -> str:
+    """The part of a target's capture names that names the target.
+
+    The display name itself when it is a safe file name; otherwise (spaces, punctuation, any
+    text a user may type) the session's rule for mask files, :func:`engine.session.edit.mask_name`.
+
+    Examples
+    --------
+    >>> m = np.eye(3, dtype=bool)
+    >>> capture_stem("right_wall", m), capture_stem("target 1", m)
+    ('right_wall', 'target_1-7ea71875')
+    """
+    return target if NAME.fullmatch(target) and len(target) <= 64 else mask_name(target, mask_digest(mask))
+
+
 def acquire_cascade(
     recorder: Recorder,
     calibration: Calibration,
@@ -318,11 +337,13 @@ def acquire_cascade(
             f"fixed_kappa must give the κ of every target but the last ({len(targets) - 1}), got {len(fixed_kappa)}"
         )
     kappas = [check_kappa(kap, 3, name=f"fixed_kappa[{i}]") for i, kap in enumerate(fixed_kappa)]
-    total = np.zeros(calibration.camera_resolution, int)
-    for _, m in targets:
-        total += m.astype(bool)
-    if (total > 1).any():
-        raise InputError("targets overlap: a pixel may belong to one target only")
+    total = np.zeros(calibration.camera_resolution, np.float64)
+    for _, m in targets:  # hard masks count 1 per pixel; soft masks their coverage
+        m = np.asarray(m)
+        total += m if m.dtype.kind == "f" else m.astype(bool)
+    if (total > 1 + 1e-6).any():
+        raise InputError("targets overlap: a pixel may belong to one target only "
+                         "(soft masks: coverages may not sum past 1)")
     rig = recorder.rig
     identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
@@ -338,10 +359,11 @@ def acquire_cascade(
     photo_name = f"{prefix}-photograph"
     photograph = _measure(recorder, photo_name, photo_pattern, {"kind": "photograph"})
     base_name = photo_name if photograph_pattern is None else f"{prefix}-black"
-    base = photograph if photograph_pattern is None else _measure(recorder, base_name, recorder.black(), {"kind": "black"})
+    base = photograph if photograph_pattern is None else _measure(recorder, base_name, recorder.black(),
+                                                                  {"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base.image, name=f"{prefix}-{n}")
+            prepare_target(recorder, calibration, m, base.image, name=f"{prefix}-{capture_stem(n, m)}")
             for n, m in targets
         ]
     plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix,

@@ -29,7 +29,9 @@ class CheckerMeasurement:
     patch_direct : (24, 3) float64
         Each patch's mean D (NaN where none of its pixels could be measured).
     scale : AlbedoScale
-        The fit of ``patch_direct`` against the reference reflectances.
+        The fit of ``patch_direct`` against the reference reflectances, with the projector's
+        light over the chart's plane (pass a target's projector coordinates to
+        :meth:`AlbedoScale.albedo`, e.g. :func:`projector_xy` of its PreparedTarget).
     prepared : PreparedTarget
         The chart measured as a target (its D image and emittable pixels).
     """
@@ -44,6 +46,12 @@ class CheckerMeasurement:
         used = int(self.scale.used.sum()) if self.scale.used is not None else 0
         return (f"colour checker ({self.checker.source}): {used} of {len(self.patch_direct)} patches fit the published "
                 f"reflectances to {self.scale.rms_residual:.1%} rms")
+
+
+def projector_xy(prepared: PreparedTarget) -> np.ndarray:
+    """(H, W, 2) float64: the projector pixel (x, y) of each camera pixel of a prepared target."""
+    corr = prepared.correspondence
+    return np.stack([corr.x, corr.y], axis=-1).astype(np.float64)
 
 
 def measure_checker(recorder: Recorder, calibration: Calibration, checker: Checker, base: np.ndarray, *,
@@ -75,5 +83,7 @@ def measure_checker(recorder: Recorder, calibration: Calibration, checker: Check
     """
     prepared = prepare_target(recorder, calibration, checker.mask(), base, name=name)
     patch_direct, _ = sample_patches(prepared.direct, checker, valid=prepared.mask)
+    patch_xy, _ = sample_patches(projector_xy(prepared), checker, valid=prepared.mask)
     rho = reference_reflectances() if sensitivities is None else reference_reflectances(sensitivities)
-    return CheckerMeasurement(checker, patch_direct, fit_albedo_scale(patch_direct, rho), prepared)
+    scale = fit_albedo_scale(patch_direct, rho, patch_xy=patch_xy)
+    return CheckerMeasurement(checker, patch_direct, scale, prepared)

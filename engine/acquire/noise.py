@@ -91,7 +91,9 @@ class Noise:
     def covariance(a: Noise, b: Noise) -> np.ndarray | None:
         """``Σ_s a_s b_s`` over the sources the two share (None if they share none)."""
         out = None
-        for k in a.terms.keys() & b.terms.keys():
+        for k in a.terms:  # in a's order, not a set's: the same sum bit for bit in every run
+            if k not in b.terms:
+                continue
             term = a.terms[k] * b.terms[k]
             out = term if out is None else out + term
         return out

@@ -147,7 +147,7 @@ class Predictor:
         noise = None
         if all(n is not None for n in self.noises):
             noise = Noise()
-            for w, n in zip(weights, self.noises):
+            for w, n in zip(weights, self.noises, strict=True):
                 noise = noise + n * w.astype(np.float32)
         return Prediction(image.astype(np.float32), err, float(bound), weights, noise)
 

@@ -16,11 +16,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from engine.errors import DeviceError, SessionError
+from engine.errors import DeviceError, DiskFull, SessionError
 from engine.noise import CameraNoise, frame_variance
 from engine.progress import Progress, ShouldStop, checkpoint, report
 from engine.rig import Frame, RigLike
 from engine.session import Session, pattern_hash
+from engine.session.space import megabytes
 
 
 @dataclass
@@ -121,30 +122,50 @@ class Recorder:
             loaded = self.session.load_capture(name)
             image, self.last_saturated = loaded.image, loaded.saturated
             meta = record.meta
-            self.last_variance = frame_variance(image, float(meta.get("exposure", 1.0) or 1.0), meta.get("metadata"), self.noise)
+            self.last_variance = frame_variance(image, float(meta.get("exposure", 1.0) or 1.0), meta.get("metadata"),
+                                                self.noise)
             self.reused.append(name)
         else:
             checkpoint(self.should_stop, "acquisition")
             report(self.progress, self.count, self.planned, f"capturing {name}")
             self.rig.projector.show(pattern)
-            frame = self._bracketed(self._shot())
+            identity = f"{name}|{pid}"
+            frame = self._bracketed(self._shot(identity), identity)
             image = np.asarray(frame.image, np.float32)
             self.last_saturated = np.asarray(frame.saturated, bool)
-            self.last_variance = frame_variance(image, float(frame.exposure), getattr(frame, "metadata", None), self.noise)
+            self.last_variance = frame_variance(image, float(frame.exposure), getattr(frame, "metadata", None),
+                                                self.noise)
             if self.session is not None:
-                self.session.add_frame(name, frame, pattern_id=pid, meta=meta or {})
+                try:
+                    self.session.add_frame(name, frame, pattern_id=pid, meta=meta or {})
+                except DiskFull as exc:
+                    left = max(self.planned - self.count, 1)
+                    raise DiskFull(f"{exc} (this run has {left} captures left to store: about "
+                                   f"{megabytes(left * exc.needed)} in all)", free=exc.free,
+                                   needed=left * exc.needed) from exc
             self.taken.append(name)
         if self.on_capture is not None:
             self.on_capture(name, image)
         report(self.progress, self.count, max(self.planned, self.count), f"captured {name}")
         return image
 
-    def _shot(self):
-        """One frame, or the mean of ``frames`` frames (saturated where any was)."""
+    def _frame(self, identity: str):
+        """One frame from the camera; a simulated camera seeds its noise from the frame's ``identity``."""
         camera = self.rig.camera
+        if hasattr(camera, "frame_identity"):
+            camera.frame_identity = identity
+        return camera.capture()
+
+    def _shot(self, identity: str):
+        """One frame, or the mean of ``frames`` frames (saturated where any was).
+
+        ``identity`` names the capture and its pattern; each frame adds its index, so no two
+        frames of a plan share their noise and a resumed run takes the frames an
+        uninterrupted one would have.
+        """
         if self.frames <= 1:
-            return camera.capture()
-        shots = [camera.capture() for _ in range(self.frames)]
+            return self._frame(f"{identity}|0")
+        shots = [self._frame(f"{identity}|{i}") for i in range(self.frames)]
         first = shots[0]
         image = np.mean([np.asarray(f.image, np.float32) for f in shots], axis=0, dtype=np.float64).astype(np.float32)
         saturated = np.logical_or.reduce([np.asarray(f.saturated, bool) for f in shots])
@@ -152,7 +173,7 @@ class Recorder:
         meta["frames"] = self.frames
         return Frame(image, first.exposure, getattr(first, "gain", 1.0), getattr(first, "black_level", 0.0), saturated, meta)
 
-    def _bracketed(self, frame):
+    def _bracketed(self, frame, identity: str):
         """Complete the frame's saturated pixels from shorter exposures (same projector image)."""
         saturated = np.asarray(frame.saturated, bool)
         camera = self.rig.camera
@@ -163,13 +184,13 @@ class Recorder:
         used = []
         refused = None
         try:
-            for _ in range(self.brackets):
+            for step in range(1, self.brackets + 1):
                 try:
                     camera.exposure = camera.exposure / self.bracket_step
                 except (AttributeError, ValueError, TypeError, DeviceError) as exc:
                     refused = str(exc)  # this camera cannot change exposure: keep what we have
                     break
-                short = self._shot()  # a failing capture is a device fault: it propagates
+                short = self._shot(f"{identity}|bracket{step}")  # a failing capture is a device fault: it propagates
                 fix = saturated & ~np.asarray(short.saturated, bool)
                 image[fix] = short.image[fix]
                 saturated = saturated & np.asarray(short.saturated, bool)

@@ -26,6 +26,7 @@ from engine.calibrate import (
 )
 from engine.errors import InputError
 from engine.noise import fit_camera_noise
+from engine.rig import fingerprint_of
 
 #: Frames of each lighting (projector black, projector white) for the camera-noise fit.
 NOISE_FRAMES = 4
@@ -34,7 +35,8 @@ NOISE_FRAMES = 4
 def calibration_budget(projector_resolution, *, levels: int = 17, crosstalk: bool = False) -> int:
     """Number of captures :func:`calibrate_rig` takes."""
     gray = len(gray_code_patterns(projector_resolution))
-    return 2 + 2 * NOISE_FRAMES + gray + 3 * levels + (len(crosstalk_patterns(projector_resolution)) if crosstalk else 0)
+    xtalk = len(crosstalk_patterns(projector_resolution)) if crosstalk else 0
+    return 2 + 2 * NOISE_FRAMES + gray + 3 * levels + xtalk
 
 
 def calibrate_rig(
@@ -81,6 +83,7 @@ def calibrate_rig(
     rig = recorder.rig
     cam_res = tuple(rig.camera.resolution)
     proj_res = tuple(rig.projector.resolution)
+    lv = ramp_levels(levels)  # checked before the first capture
     recorder.planned = calibration_budget(proj_res, levels=levels, crosstalk=crosstalk)
     black = recorder.capture("cal-black", recorder.black(), meta={"kind": "calibration"})
     white = recorder.capture("cal-white", np.ones(proj_res + (3,), np.float32), meta={"kind": "calibration"})
@@ -96,7 +99,6 @@ def calibrate_rig(
     corr = decode_gray_code(gray_caps, proj_res)
     if not corr.valid.any():
         raise InputError("no camera pixel decoded the Gray code: check focus, exposure and that the projector lights the scene")
-    lv = ramp_levels(levels)
     ramp = [recorder.capture(f"cal-ramp-{i:03d}", p, meta={"kind": "calibration"})
             for i, p in enumerate(response_patterns(lv, proj_res, channels="separate"))]
     response = fit_response(np.stack(ramp), lv, channels="separate", mask=corr.valid)
@@ -116,6 +118,7 @@ def calibrate_rig(
             "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
             "exposure": str(report_),
             "coverage": corr.summary(),
+            "rig_fingerprint": fingerprint_of(rig),
             "exposure_s": float(getattr(rig.camera, "exposure", 0.0) or 0.0),
             "gain": float(getattr(rig.camera, "gain", 1.0) or 1.0),
             "noise": noise.to_dict(),

@@ -17,7 +17,7 @@ from engine.acquire.emission import Emitter, Negative
 from engine.acquire.noise import Noise
 from engine.acquire.recorder import Recorder
 from engine.acquire.target import PreparedTarget
-from engine.calibrate import projector_to_camera_map
+from engine.calibrate import projector_to_camera_map, warp_to_projector
 from engine.noise import quantization_variance
 
 
@@ -156,7 +156,8 @@ def reemit(recorder: Recorder, emitter: Emitter, wanted: np.ndarray, base: np.nd
     light = Emitter.combine(emissions, captures, base)
     if noise is None or any(v is None for v in variances):
         return Reemission(light, names, clamped)
-    return Reemission(light, names, clamped, _reemission_noise(recorder, emitter, wanted, emissions, names, variances, noise))
+    tracked = _reemission_noise(recorder, emitter, wanted, emissions, names, variances, noise)
+    return Reemission(light, names, clamped, tracked)
 
 
 def _reemission_noise(recorder, emitter: Emitter, wanted, emissions, names, variances, noise: EmittedNoise) -> Noise:
@@ -171,8 +172,28 @@ def _reemission_noise(recorder, emitter: Emitter, wanted, emissions, names, vari
     shown = t3 & np.ones(3, bool)  # where the wanted light is shown (clamped negatives are not)
     if emitter.negative == Negative.CLAMP:
         shown = shown & (emitter.light(wanted) > 0)
-    out = noise.wanted * np.where(shown, 1.0 / np.sqrt(count)[:, :, None], 0.0)
-    for em, cname, var in zip(emissions, names, variances):
+    # a projector pixel seen by n camera pixels q' shows Σ wanted / Σ D over them
+    # (Emitter._warp), so pixel q gets back the fraction D_q / Σ D of its own noise, and as
+    # much of its neighbours' variance, independent of its own
+    def back(image):  # camera image → per projector pixel mean over the pixels seeing it → camera
+        proj = warp_to_projector(image, corr, target=target)
+        out_ = np.zeros(target.shape + (3,), np.float32)
+        out_[ys, xs] = proj[corr.y[ys, xs], corr.x[ys, xs]]
+        return out_
+
+    n3 = count[:, :, None]
+    if emitter.per_channel or emitter.direct_matrix is None:
+        d = np.where(t3, emitter.direct, 0.0).astype(np.float32)
+        block = back(d) * n3
+        share = np.where(shown & (block > 0), d / np.where(block > 0, block, 1.0), 0.0)
+    else:  # the pattern is the plain mean of the camera pixels' light
+        share = np.where(shown, 1.0 / n3, 0.0)
+    out = noise.wanted * share
+    wanted_var = noise.wanted.variance()
+    if wanted_var is not None and bool(np.any(count > 1)):
+        others = np.maximum(back(np.where(t3, wanted_var, 0.0).astype(np.float32)) * n3 - wanted_var, 0.0)
+        out = out + Noise.fresh(np.sqrt(others) * share, "shared")
+    for em, cname, var in zip(emissions, names, variances, strict=True):
         chans = np.zeros(3, np.float32)
         chans[list(em.channels)] = 1.0
         factor = np.float32(em.sign / em.scale) * chans

@@ -14,6 +14,7 @@ from engine.calibrate.response import ProjectorResponse
 from engine.checks import check_image, check_resolution
 from engine.errors import InputError
 from engine.noise import CameraNoise
+from engine.rig import fingerprint_differences
 
 __all__ = ["CALIBRATION_VERSION", "Calibration"]
 
@@ -26,6 +27,10 @@ _ARRAYS = {
     "correspondence_y": (np.int32, "camera"),
     "correspondence_status": (np.uint8, "camera"),
 }
+
+
+#: fingerprint entries said in words by :meth:`Calibration.check_compatible` itself
+_RESOLUTION_KEYS = ("camera resolution", "projector resolution")
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,8 +92,12 @@ class Calibration:
         d = self.metadata.get("noise")
         return None if d is None else CameraNoise.from_dict(d)
 
-    def check_compatible(self, rig_name: str, camera_resolution, projector_resolution) -> None:
+    def check_compatible(self, rig_name: str, camera_resolution, projector_resolution,
+                         fingerprint: dict | None = None) -> None:
         """Raise InputError saying why this calibration does not fit a rig.
+
+        ``fingerprint`` is the rig's (:func:`engine.rig.fingerprint_of`); it is compared with
+        the one recorded in ``metadata["rig_fingerprint"]`` when the calibration has one.
 
         Examples
         --------
@@ -106,16 +115,20 @@ class Calibration:
             raise InputError(
                 f"calibration was made for rig {self.rig_name!r}, this rig is {rig_name!r}; recalibrate"
             )
+        resolutions = []  # every difference in one message, so one recalibration fixes them all
         if cam != self.camera_resolution:
-            raise InputError(
-                f"calibration was made for camera {wh(self.camera_resolution)}, this rig's camera is "
-                f"{wh(cam)}; recalibrate"
-            )
+            resolutions.append(f"camera {wh(self.camera_resolution)}, this rig's camera is {wh(cam)}")
         if proj != self.projector_resolution:
-            raise InputError(
-                f"calibration was made for projector {wh(self.projector_resolution)}, this rig's projector is "
-                f"{wh(proj)}; recalibrate"
-            )
+            resolutions.append(f"projector {wh(self.projector_resolution)}, this rig's projector is {wh(proj)}")
+        made_with = self.metadata.get("rig_fingerprint")
+        others = []
+        if fingerprint is not None and isinstance(made_with, dict):
+            others = [d for d in fingerprint_differences(made_with, fingerprint) if not d.startswith(_RESOLUTION_KEYS)]
+        if resolutions:
+            raise InputError(f"calibration was made for {'; '.join(resolutions + others)}; recalibrate")
+        if others:
+            raise InputError(f"calibration was made with another set-up of rig {rig_name!r}: "
+                             f"{'; '.join(others)}; recalibrate")
 
     def to_dict(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """Split into a JSON-serialisable description and named arrays (no pickle).

@@ -102,9 +102,10 @@ def exposure_report(
     saturated : (H, W) bool, optional
         Clipped pixels (``Frame.saturated``).
     full_scale : float, optional
-        Radiance at which the camera clips. Without ``saturated``, pixels at or above it count
-        as saturated. Default: the brightest value of the judged pixels, so under-exposure is
-        then judged relative to the brightest pixel.
+        Radiance at which the camera clips (``Frame.full_scale``). Without ``saturated``, pixels
+        at or above it count as saturated. Default (and for ``inf``, a camera that does not
+        clip): the brightest value of the judged pixels, so under-exposure is then judged
+        relative to the brightest pixel.
     low : float
         A pixel is under-exposed when its brightest channel is below ``low × full_scale``.
     black : (H, W, 3) float, optional
@@ -141,8 +142,14 @@ def exposure_report(
     if n == 0:
         return ExposureReport(0, None, 0.0, None, False, "no pixels", "no pixels to judge: the target is empty")
     peak = img[sel].max(axis=-1)  # brightest channel per judged pixel
-    scale = float(peak.max()) if full_scale is None else check_positive("full_scale", full_scale)
-    if saturated is not None:
+    no_clip = full_scale is not None and np.isposinf(full_scale)
+    if full_scale is None or no_clip:
+        scale = float(peak.max())
+    else:
+        scale = check_positive("full_scale", full_scale)
+    if no_clip:
+        sat_frac = 0.0
+    elif saturated is not None:
         sat = check_mask("saturated", saturated, (h, w))[sel]
         sat_frac: float | None = float(sat.mean())
     elif full_scale is not None:
@@ -161,11 +168,14 @@ def exposure_report(
     under_bad = under > limits["max_underexposed"]
     amb_bad = amb is not None and amb > limits["max_ambient"]
     what = label or ("target pixels" if target is not None else "pixels")
-    if sat_frac is None:
+    if no_clip:
+        sat_txt = f"the camera does not clip ({n} {what} judged; any exposure gives the same radiance)"
+    elif sat_frac is None:
         sat_txt = "saturation not checked (no saturation mask or full scale)"
     else:
         sat_txt = f"{100 * sat_frac:.1f}% of {n} {what} saturated"
-    facts = f"{sat_txt}, {100 * under:.1f}% under-exposed (below {100 * low:.0f}% of full scale)"
+    of = "of the brightest" if no_clip else "of full scale"
+    facts = f"{sat_txt}, {100 * under:.1f}% under-exposed (below {100 * low:.0f}% {of})"
     if amb is not None:
         facts += f", ambient light {100 * amb:.0f}% of the image"
     if over_bad and under_bad:
@@ -223,13 +233,16 @@ class AutoExposure:
 
     Radiance (``Frame.image``) does not depend on the exposure, but the radiance at which the
     camera clips does: it is ``c / exposure`` for a constant ``c`` of the camera and gain.
-    Nothing in a frame says where clipping is until something clips, so the stepper lengthens
-    the exposure by ``step_factor`` while nothing clips, shortens it by ``step_factor`` while too
-much clips,
+    When the frame says where it clips (``Frame.full_scale``), ``c`` is known at once and the
+    stepper jumps to the exposure that puts the ``percentile``-th brightest judged pixel at
+    ``headroom`` of full scale; a camera that does not clip (``full_scale`` infinite) is
+    settled as it is, since any exposure gives the same radiance. Otherwise nothing in a frame
+    says where clipping is until something clips, so the stepper lengthens the exposure by
+    ``step_factor`` while nothing clips, shortens it by ``step_factor`` while too much clips,
     and once it has seen clipped pixels (whose radiance is the clip level, a lower bound of it
-    where only some channels clipped — the smallest one is taken) it computes ``c`` and jumps to
-    the exposure that puts the ``percentile``-th brightest judged pixel at ``headroom`` of
-    full scale. Works with any camera whose frames carry a saturation mask.
+    where only some channels clipped — the smallest one is taken) it computes ``c`` and jumps.
+    Callers bound the number of frames (a camera that never clips and never says so would be
+    lengthened for ever).
 
     Parameters
     ----------
@@ -256,6 +269,10 @@ much clips,
     0.08
     >>> auto.step(img, np.zeros((100, 100), bool), exposure=0.08) is None  # settled
     True
+    >>> round(AutoExposure().step(img, np.zeros((100, 100), bool), exposure=0.01, full_scale=20.0), 4)
+    0.08
+    >>> AutoExposure().step(img, np.zeros((100, 100), bool), exposure=0.01, full_scale=np.inf) is None
+    True
     """
 
     headroom: float = 0.8
@@ -265,7 +282,7 @@ much clips,
     tolerance: float = 1.26
     clip_constant: float | None = None  # radiance at clipping × exposure, once seen
 
-    def step(self, image, saturated, *, exposure: float, target=None) -> float | None:
+    def step(self, image, saturated, *, exposure: float, target=None, full_scale: float | None = None) -> float | None:
         """The next exposure to try after a frame taken at ``exposure``, or None when settled.
 
         Parameters
@@ -278,11 +295,14 @@ much clips,
             The exposure the frame was actually taken at (``Frame.exposure``, seconds).
         target : (H, W) bool, optional
             Judge only these pixels.
+        full_scale : float, optional
+            ``Frame.full_scale``: the radiance at which this frame clips, when known (``inf``:
+            the camera does not clip).
 
         Raises
         ------
         InputError
-            Bad shapes, a non-positive exposure, or nothing to judge.
+            Bad shapes, a non-positive exposure or full scale, or nothing to judge.
         """
         img = check_image("image", image)
         h, w = img.shape[:2]
@@ -291,7 +311,11 @@ much clips,
         exposure = check_positive("exposure", exposure)
         if not sel.any():
             raise InputError("target is empty: nothing to expose for")
-        if sat.any():
+        if full_scale is not None:
+            if np.isposinf(full_scale):
+                return None  # a camera that does not clip: every exposure gives the same radiance
+            self.clip_constant = check_positive("full_scale", full_scale) * exposure
+        elif sat.any():
             self.clip_constant = float(img[sat].max(axis=-1).min()) * exposure
         if float(sat[sel].mean()) > self.max_saturated:
             return exposure / self.step_factor

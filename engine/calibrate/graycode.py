@@ -21,7 +21,7 @@ import numpy as np
 
 from engine.calibrate._common import Patterns, plane_to_rgb, wh
 from engine.checks import check_resolution
-from engine.errors import InputError
+from engine.errors import AlbeditError, InputError
 
 __all__ = [
     "Correspondence",
@@ -113,7 +113,7 @@ def gray_code_patterns(projector_resolution) -> Patterns:
     """
     hp, wp = check_resolution("projector_resolution", projector_resolution)
     ncol, nrow = gray_code_bits((hp, wp))
-    ok, planes = cv2.structured_light.GrayCodePattern.create(wp, hp).generate()
+    ok, planes = _gray_code_pattern(wp, hp).generate()
     if not ok or len(planes) != 2 * (ncol + nrow):  # pragma: no cover - OpenCV contract
         raise RuntimeError(f"OpenCV generated {len(planes)} Gray-code images, expected {2 * (ncol + nrow)}")
     planes = [np.asarray(p, dtype=np.uint8) for p in planes]
@@ -558,3 +558,15 @@ def _plane_fit(good: np.ndarray, values, radius: int, *, leave_one_out: bool):
         coef = np.linalg.solve(safe, rhs[..., None])[..., 0]
         out.append((coef * pos).sum(-1))
     return out[0], out[1], ok
+
+
+def _gray_code_pattern(wp: int, hp: int):
+    """OpenCV's Gray-code generator, or a plain error when the contrib build was replaced."""
+    structured_light = getattr(cv2, "structured_light", None)
+    if structured_light is None or not hasattr(structured_light, "GrayCodePattern"):
+        raise AlbeditError(
+            f"OpenCV {cv2.__version__} has no structured_light module: another package replaced the contrib "
+            "build; run `pip uninstall -y opencv-python opencv-python-headless` and "
+            "`pip install --force-reinstall --no-deps opencv-contrib-python-headless`"
+        )
+    return structured_light.GrayCodePattern.create(wp, hp)

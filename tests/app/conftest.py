@@ -87,10 +87,13 @@ def make_window(qtbot, tmp_path):
 
     def make(document=None, session=None, **kw):
         settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-        w = MainWindow(document, session, synchronous=True, settings=settings, **kw)
+        kw.setdefault("synchronous", True)
+        w = MainWindow(document, session, settings=settings, **kw)
         w.resize(1200, 800)
         w.show()
         qtbot.waitExposed(w)
+        w.activateWindow()  # shortcuts go to the active window, as on a desktop
+        qtbot.waitUntil(w.isActiveWindow)
         windows.append(w)
         return w
 
@@ -120,7 +123,7 @@ class Dialogs:
 def dialogs(monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 
-    from app.qt.main_window import MainWindow
+    from app.qt.file_control import FileControl
 
     rec = Dialogs()
     for kind in ("critical", "warning", "information"):
@@ -137,7 +140,7 @@ def dialogs(monkeypatch):
         return rec._answer(QMessageBox.StandardButton.Cancel)
 
     monkeypatch.setattr(QMessageBox, "question", staticmethod(question))
-    monkeypatch.setattr(MainWindow, "ask_unsaved", unsaved)
+    monkeypatch.setattr(FileControl, "ask_unsaved", unsaved)
     return rec
 
 

@@ -22,7 +22,7 @@ def device_name(request) -> str:
     return name
 
 
-def write_dng(mosaic, *, black: int = 64, white: int = 4000, cfa=(0, 1, 1, 2)) -> bytes:
+def write_dng(mosaic, *, black: int = 64, white: int = 4000, cfa=(0, 1, 1, 2), orientation: int = 1) -> bytes:
     """A minimal uncompressed CFA DNG (little-endian TIFF) of ``mosaic`` (H, W) uint16 that LibRaw reads.
 
     Colour matrix and neutral are identity, so the linear decode of a flat mosaic value v is
@@ -51,7 +51,7 @@ def write_dng(mosaic, *, black: int = 64, white: int = 4000, cfa=(0, 1, 1, 2)) -
 
     add(254, 4, [0]); add(256, 4, [w]); add(257, 4, [h]); add(258, 3, [16]); add(259, 3, [1])  # noqa: E702
     add(262, 3, [32803]); add(271, 2, "Albedit"); add(272, 2, "Test"); add(273, 4, [0])  # noqa: E702
-    add(274, 3, [1]); add(277, 3, [1]); add(278, 4, [h]); add(279, 4, [len(data)]); add(284, 3, [1])  # noqa: E702
+    add(274, 3, [orientation]); add(277, 3, [1]); add(278, 4, [h]); add(279, 4, [len(data)]); add(284, 3, [1])  # noqa: E702
     add(33421, 3, [2, 2]); add(33422, 1, list(cfa)); add(50706, 1, [1, 4, 0, 0]); add(50707, 1, [1, 1, 0, 0])  # noqa: E702
     add(50708, 2, "Albedit Test"); add(50714, 4, [black]); add(50717, 4, [white])  # noqa: E702
     add(50721, 10, [(1, 1), (0, 1), (0, 1), (0, 1), (1, 1), (0, 1), (0, 1), (0, 1), (1, 1)])

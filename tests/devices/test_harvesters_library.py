@@ -42,7 +42,7 @@ def test_missing_and_invalid_producer_files(tmp_path, capsys):
     with pytest.raises(DeviceError, match=r"^no GenTL producer file at '.*maker.cti' \(the camera maker's .cti\)$"):
         HarvestersCamera(missing)
     missing.write_text("not a shared library")
-    with pytest.raises(DeviceError, match=r"^loading the GenTL producer failed: .*maker.cti: (file too short|invalid ELF header)"):
+    with pytest.raises(DeviceError, match=r"^loading the GenTL producer failed: .*maker.cti: (file too|invalid ELF)"):
         HarvestersCamera(missing)
     line = _cli_error(capsys, "devices", "--check", f"harvesters:{missing}")
     assert line.startswith("albedit devices: error: loading the GenTL producer failed:")
@@ -70,7 +70,10 @@ def test_simulated_camera_captures_linear_frames(viky):
     cam = HarvestersCamera(viky, serial="1")
     try:
         assert cam.pixel_format == "Mono8" and cam.resolution == (400, 400)  # RGBa8 is not linear-unpacked
-        assert cam.warnings == ["the camera has no ExposureTime feature: radiance is in relative units (exposure recorded as 1 s)"]
+        assert cam.fingerprint["serial"] == "1" and cam.fingerprint["model"]  # a calibration is of this body
+        assert cam.warnings == [
+            "the camera has no ExposureTime feature: radiance is in relative units (exposure recorded as 1 s)"
+        ]
         frame = cam.capture()
         assert frame.image.shape == (400, 400, 3) and frame.image.dtype == np.float32
         assert frame.exposure == 1.0 and frame.gain == 1.0 and frame.metadata["top_code"] == 255
@@ -96,7 +99,7 @@ def test_no_frame_within_the_timeout_and_the_next_one_arrives(viky):
 
 
 def test_unknown_camera_is_a_plain_error(viky):
-    with pytest.raises(DeviceError, match=r"^opening the camera failed: no device found: provide sufficient search key$"):
+    with pytest.raises(DeviceError, match=r"^opening the camera failed: no device found: provide sufficient search"):
         HarvestersCamera(viky, serial="7")
     with pytest.raises(DeviceError, match=r"^there is no camera 5: 3 found through viky.cti$"):
         HarvestersCamera(viky, index=5)

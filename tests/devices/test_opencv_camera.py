@@ -92,6 +92,7 @@ def test_mjpg_video_file_reads_back_linearised(tmp_path):
     writer.release()
     raw = open_camera(path, response="linear")
     cam = open_camera(path, response="srgb", exposure=0.25)
+    assert cam.fingerprint == {"source": path, "api": cam.backend}  # a calibration is of this source
     try:
         for v in levels:
             codes = raw.capture_codes()

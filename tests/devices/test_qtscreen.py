@@ -228,3 +228,18 @@ def test_probe_lists_screens():
     entries = qtscreen.probe()
     assert [e.name for e in entries] == ["qtscreen:0"] and entries[0].ok
     assert qtscreen.default_problem() == "no second screen for the projector (1 screen found)"
+
+
+def test_fingerprint_names_the_screen_a_calibration_belongs_to(projector):
+    from devices.base import Rig
+
+    screen = qtscreen.QApplication.screens()[0]
+    assert projector.fingerprint == {"screen": screen.name(), "size": list(projector.resolution),
+                                     "manufacturer": screen.manufacturer(), "model": screen.model(),
+                                     "serial": screen.serialNumber()}
+
+    class _Camera:
+        resolution, exposure, gain = (4, 4), 1.0, 1.0
+
+    rig = Rig("opencv:0", _Camera(), projector)
+    assert rig.fingerprint["projector screen"] == screen.name()

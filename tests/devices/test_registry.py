@@ -47,7 +47,8 @@ def wall(monkeypatch):
 
 
 def test_a_projector_backend_is_chosen_by_name_with_its_options(wall, tmp_path):
-    rig = devices.open_rig(f"hotfolder:{tmp_path}", projector="wall:left", settle=0.2, projector_timeout=3.0, resolution=(2, 3))
+    name = f"hotfolder:{tmp_path}"
+    rig = devices.open_rig(name, projector="wall:left", settle=0.2, projector_timeout=3.0, resolution=(2, 3))
     assert isinstance(rig.projector, WallProjector) and rig.camera.resolution == (2, 3)
     assert rig.projector.arg == "left" and rig.projector.options == {"settle": 0.2, "timeout": 3.0}
     assert rig.camera._sleep == rig.projector.idle  # the camera waits through the projector

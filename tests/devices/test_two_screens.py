@@ -21,7 +21,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.mark.parametrize(
     "layout, module",
-    [("desk", "test_projector_window.py"), ("hidpi", "test_projector_window.py"), ("desk", "test_loopback.py")],
+    [
+        ("desk", "test_projector_window.py"),
+        ("hidpi", "test_projector_window.py"),
+        ("desk", "test_loopback.py"),
+        ("desk", "test_loopback_faults.py"),
+        ("desk", "test_journey.py"),
+    ],
 )
 def test_on_two_screens(tmp_path, layout, module):
     env = dict(os.environ, QT_QPA_PLATFORM=platform(tmp_path, layout), PYTHONPATH=str(ROOT))

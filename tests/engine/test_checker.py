@@ -89,6 +89,30 @@ def test_fit_recovers_the_scale_and_drops_a_bad_patch():
         fit_albedo_scale(np.where(np.arange(24)[:, None] < 5, d, np.nan), rho)
 
 
+def test_fit_models_a_projector_lighting_the_charts_plane_unevenly():
+    rho = reference_reflectances()
+    v, u = np.divmod(np.arange(24), 6)
+    xy = np.stack([40.0 + 12 * u, 30.0 + 12 * v], axis=1)  # projector pixels of the patch centres
+
+    def light(p):
+        return (1.0 + 0.004 * p[..., 0] - 0.006 * p[..., 1]) ** 3  # h / z³ on a tilted plane
+
+    scale = np.array([1.1, 0.9, 1.4])
+    d = rho * scale * light(xy)[:, None]
+    uniform = fit_albedo_scale(d, rho)
+    assert uniform.rms_residual > 0.05
+    fit = fit_albedo_scale(d, rho, patch_xy=xy)
+    assert fit.rms_residual < 1e-9 and fit.used.all()
+    # a target in the same plane, beside the chart
+    target = np.ones((2, 2), bool)
+    pix = np.stack(np.meshgrid([120.0, 125.0], [90.0, 95.0]), axis=-1)
+    albedo = np.array([0.3, 0.5, 0.2])
+    direct = albedo * scale * light(pix)[..., None]
+    np.testing.assert_allclose(fit.albedo(direct, target, pix), albedo, rtol=1e-9)
+    with pytest.raises(InputError, match="projector coordinates"):
+        fit.albedo(direct, target)
+
+
 def test_albedo_from_a_checker_scale_and_from_a_reference_card():
     target = np.zeros((4, 5), bool)
     target[1:3, 1:4] = True

@@ -11,6 +11,7 @@ from engine.colour import (
     kappa_limit,
     luminance_weights,
     parse_colour,
+    pick_colour,
     to_hex,
     to_lab,
 )
@@ -47,6 +48,18 @@ def test_srgb_lab_and_linear_forms_agree_on_one_colour():
 def test_unreadable_or_impossible_colours_are_refused_with_the_fix(text, match):
     with pytest.raises(InputError, match=match):
         parse_colour(text)
+
+
+def test_eyedropper_averages_linear_light_and_decodes_reference_pictures():
+    img = np.zeros((6, 8, 3), np.float32)
+    img[:, 4:] = 1.0  # half black, half white: the pick straddles the edge
+    assert pick_colour(img, 4, 3, radius=1).tolist() == pytest.approx([2 / 3] * 3)
+    encoded = np.full((4, 4, 3), 0x80 / 255, np.float32)  # a reference picture's sRGB grey
+    assert pick_colour(encoded, 0, 0, radius=3, encoded=True) == pytest.approx(parse_colour("#808080"))
+    with pytest.raises(InputError, match="outside the 8×6 image"):
+        pick_colour(img, 8, 0)
+    with pytest.raises(InputError, match="radius"):
+        pick_colour(img, 1, 1, radius=-1)
 
 
 def test_kappa_is_the_ratio_and_keeping_luminance_keeps_only_hue():

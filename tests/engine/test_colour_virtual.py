@@ -7,7 +7,7 @@ import pytest
 
 import devices
 from devices.virtual.scene import SCENE_DIR
-from engine.acquire import Recorder, measure_checker, prepare_target
+from engine.acquire import Recorder, measure_checker, prepare_target, projector_xy
 from engine.albedo import reference_scale
 from engine.checker import detect_checker, reference_reflectances
 from engine.colour import direct_colour, kappa_for_albedo
@@ -24,23 +24,25 @@ def _calibrated(rig, path):
     return session, calibration, recorder, photograph
 
 
-def test_checker_gives_the_panels_absolute_albedo_within_2_percent(tmp_path):
-    with devices.open_rig("virtual:checker", ideal=True, resolution=(96, 96), cache_dir=tmp_path / "cache") as rig:
+@pytest.mark.parametrize("projector", ["coaxial", "offset"])
+def test_checker_gives_the_panels_absolute_albedo_within_2_percent(tmp_path, projector):
+    """The panel beside the chart, in its plane; the offset projector lights that plane
+    unevenly (the fit models it)."""
+    with devices.open_rig("virtual:checker", ideal=True, resolution=(96, 96), projector=projector,
+                          cache_dir=tmp_path / "cache") as rig:
         _, calibration, recorder, photograph = _calibrated(rig, tmp_path / "s")
         chart = measure_checker(recorder, calibration, detect_checker(photograph), photograph)
-        assert chart.scale.used.all() and chart.scale.rms_residual < 0.01, chart.report()
+        assert chart.scale.used.all() and np.abs(chart.scale.residual).max() < 0.02, chart.report()
         truth = rig.truth.albedo()
         panel = rig.targets["panel"]
         d = prepare_target(recorder, calibration, panel, photograph, name="panel")
-        albedo = chart.scale.albedo(d.direct, d.mask)
+        albedo = chart.scale.albedo(d.direct, d.mask, projector_xy(d))
         np.testing.assert_allclose(albedo, truth[panel].mean(axis=0), rtol=0.02)
-        # the chart's own patches, read back through the fit
-        np.testing.assert_allclose(chart.patch_direct / chart.scale.scale, reference_reflectances(), rtol=0.02)
-        # a wall the projector grazes from farther away gets less light per unit albedo than
-        # the chart: its colour (chromaticity) is right, its absolute albedo is not
+        # a wall out of the chart's plane, grazed by the projector from farther away, gets less
+        # light per unit albedo than the model says: its chromaticity is right, its albedo not
         wall = rig.targets["right_wall"]
         w = prepare_target(recorder, calibration, wall, photograph, name="wall")
-        seen, true = chart.scale.albedo(w.direct, w.mask), truth[wall].mean(axis=0)
+        seen, true = chart.scale.albedo(w.direct, w.mask, projector_xy(w)), truth[wall].mean(axis=0)
         np.testing.assert_allclose(seen / seen.sum(), true / true.sum(), rtol=0.02)
         assert seen[0] / true[0] < 0.8
 

@@ -42,11 +42,12 @@ def test_unconstrained_covariance_is_the_propagated_one_and_matches_sampling():
     target[0, : n // 2] = True
     m_in, m_out = transport_matrix(order), outside_matrix(order)
     outside = np.array([0.5, 0.2, 0.05])  # L̄_d, C R^0 L_d, C R^1 L_d
-    clean = np.where(target[None, :, :, None], (m_in @ comps)[:, None, None, None], (m_out @ outside)[:, None, None, None])
+    clean = np.where(target[None, :, :, None], (m_in @ comps)[:, None, None, None],
+                     (m_out @ outside)[:, None, None, None])
     obs = clean + rng.standard_normal((order,) + shape) * sd[:, None, None, None]
     d = decompose(obs, target, constraint="none", covariance=_diagonal(order, shape, sd))
-    for region, matrix, truth, values in ((target, m_in, comps, d.components),
-                                          (~target, m_out, outside, np.concatenate([d.unreached[None], d.components[:2]]))):
+    off = np.concatenate([d.unreached[None], d.components[:2]])
+    for region, matrix, truth, values in ((target, m_in, comps, d.components), (~target, m_out, outside, off)):
         inv = np.linalg.inv(matrix)
         expected = inv @ np.diag(sd**2) @ inv.T
         got = unpack_covariance(d.covariance)[:, :, region, 0].mean(axis=-1, dtype=np.float64)
@@ -83,7 +84,8 @@ def test_weights_decide_where_the_ordering_constraint_binds():
     err_weighted = np.abs(weighted.components[:2, 0, t, 0] - comps[:2, None]).mean()
     assert err_weighted < 0.7 * err_plain
     # an active constraint fixes its increment: no spread along it
-    assert np.all(np.asarray(weighted.covariance)[packed_index(2, 2, 3), 0, t, 0][weighted.components[2, 0, t, 0] == 0] < 1e-12)
+    variance = np.asarray(weighted.covariance)[packed_index(2, 2, 3), 0, t, 0]
+    assert np.all(variance[weighted.components[2, 0, t, 0] == 0] < 1e-12)
 
 
 def test_recolor_variance_is_the_weighted_covariance():

@@ -325,11 +325,12 @@ def test_dng_brightness_is_linear_across_frames():
     assert default.mean() > 0.95  # what the guard prevents
 
 
-@stands_in_for("rawpy:RawPy", attributes=("raw_image_visible", "white_level", "black_level_per_channel"))
+@stands_in_for("rawpy:RawPy", attributes=("raw_type", "raw_image_visible", "white_level", "black_level_per_channel"))
 class RawStandIn:
-    """rawpy's RawPy: records the postprocess options; a white frame."""
+    """rawpy's RawPy: a mosaic file; records the postprocess options; a white frame."""
 
     _calls: list = []
+    raw_type = rawpy.RawType.Flat
     raw_image_visible = np.full((2, 3), 4095, np.uint16)
     white_level = 4095
     black_level_per_channel = [64, 64, 64, 64]

@@ -297,7 +297,7 @@ def _set_capture_file(rel):
         (lambda r: _edit_manifest(r, lambda m: m.update(schema_version=0)), "unknown schema_version 0"),
         (lambda r: _edit_manifest(r, lambda m: m.update(schema_version="1")), "schema_version must be an integer"),
         (lambda r: _edit_manifest(r, lambda m: m.pop("format")), "not an Albedit session manifest"),
-        (lambda r: _edit_manifest(r, lambda m: m["captures"][0].pop("sha256")), r"captures\[0\]: sha256 must be"),
+        (lambda r: _edit_manifest(r, lambda m: m["captures"][0].pop("sha256")), r"captures\[0\]\.sha256 is missing"),
         (lambda r: _edit_manifest(r, lambda m: m["captures"].append(m["captures"][0])), "repeats the name 'c0'"),
         (lambda r: (r / "captures" / "c1.exr").unlink(), r"capture 'c1' \(captures\[1\]\): file .*c1\.exr is missing"),
         (_corrupt_capture, r"capture 'c1'.*c1\.exr is corrupt"),

@@ -19,4 +19,10 @@ elif LAYOUT not in LAYOUTS or "configfile=" not in os.environ.get("QT_QPA_PLATFO
 @pytest.fixture(scope="session")
 def layout() -> dict:
     """The screens this process runs on (the configuration Qt was given)."""
-    return {"name": LAYOUT, **LAYOUTS[LAYOUT]}
+    return {"name": LAYOUT, "screens": LAYOUTS[LAYOUT]}
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """One virtual set-up of the bench's scene for every rig of a module (built once, ~10 s)."""
+    return tmp_path_factory.mktemp("virtual-cache")

@@ -32,7 +32,8 @@ def _patterns(resolution):
     noise = rng.integers(0, 256, (hp, wp, 3)).astype(np.float32) / 255
     stripes = np.zeros((hp, wp, 3), np.float32)
     stripes[:, ::2] = 1.0
-    checker = ((np.indices((hp, wp)).sum(axis=0) % 2)[..., None] * np.array([1.0, 0.5, 0.0], np.float32)).astype(np.float32)
+    odd = (np.indices((hp, wp)).sum(axis=0) % 2)[..., None]
+    checker = (odd * np.array([1.0, 0.5, 0.0], np.float32)).astype(np.float32)
     return [noise, stripes, checker]
 
 
@@ -81,7 +82,7 @@ def test_patterns_are_shown_pixel_for_pixel(layout):
                 np.testing.assert_array_equal(proj.grab_screen(), _codes(pattern))  # as displayed
         if layout["name"] == "hidpi":
             # Qt's offscreen platform grabs a window in logical pixels at a ratio of 2: refused, not resampled
-            with pytest.raises(DeviceError, match=r"is 512x384 pixels, not its 1024x768 device pixels \(device-pixel ratio 2\)"):
+            with pytest.raises(DeviceError, match=r"is 512x384 pixels, not its 1024x768 device pixels \(device-pixel"):
                 proj.grab_screen()
     finally:
         proj.close()
@@ -145,7 +146,7 @@ def test_the_projector_screen_removed_is_a_typed_error():
         app.screenRemoved.emit(panel)  # another screen going away does not matter
         proj.show(np.zeros((*proj.resolution, 3), np.float32))
         app.screenRemoved.emit(projector_screen)  # what Qt emits when HDMI-1 is unplugged
-        with pytest.raises(DeviceError, match=r"^the projector's screen 'HDMI-1' was disconnected; reconnect the projector"):
+        with pytest.raises(DeviceError, match=r"^the projector's screen 'HDMI-1' was disconnected; reconnect"):
             proj.show(np.zeros((*proj.resolution, 3), np.float32))
     finally:
         proj.close()

@@ -1,5 +1,6 @@
 """The headless CLI: help everywhere, the demo end to end, one-line errors and exit codes."""
 
+import re
 import subprocess
 import sys
 
@@ -25,15 +26,18 @@ def test_every_command_has_help(command, capsys):
 
 def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     out = tmp_path / "demo"
-    result = _run("demo", "-o", str(out), "--ideal", "--resolution", "32", "--frames", "1", "--denoise", "0")
+    result = _run("demo", "-o", str(out), "--resolution", "32")  # the app's default rig: ideal
     assert result.returncode == 0, result.stderr
-    error = float(result.stdout.strip())
-    assert error < 0.5  # percent, ideal rig at 32x32
-    assert "relative error vs ground truth" in result.stderr
+    headline = re.fullmatch(r"relative error vs ground truth on the surfaces \(ideal rig, the lamp left out\): "
+                            r"Albedit ([0-9.]+) %, naive per-pixel recolor ([0-9.]+) %", result.stdout.strip())
+    assert headline, result.stdout
+    ours, naive = (float(v) for v in headline.groups())
+    assert ours < 0.5 and naive > 10 * ours  # percent, ideal rig at 32x32: like with like, the surfaces
+    assert "noise reduction: off: the components' noise is" in result.stderr  # noise-free data are left alone
     for name in ("recolored.exr", "recolored.png", "truth.png", "error.png", "photograph.png"):
         assert (out / name).exists(), name
     assert read_image(out / "recolored.exr").shape == (32, 32, 3)
-    assert "albedit.edit" in read_metadata(out / "recolored.exr")
+    assert read_metadata(out / "recolored.exr")["edit"]["kappa"] == [2.0, 0.125, 8.0]
     # the headless recolor of the demo's session writes the same image
     again = _run("recolor", str(out / "session"), "--kappa", "2,0.125,8", "-o", str(tmp_path / "again.exr"))
     assert again.returncode == 0, again.stderr
@@ -41,6 +45,18 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     exported = _run("export", str(out / "session"), "-o", str(tmp_path / "export.tif"))
     assert exported.returncode == 0, exported.stderr
     np.testing.assert_allclose(read_image(tmp_path / "export.tif"), read_image(out / "recolored.exr"), rtol=1e-6)
+
+
+def test_demo_runs_on_the_path_traced_rig(tmp_path):
+    pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+    out = tmp_path / "demo"
+    result = _run("demo", "-o", str(out), "--rig", "mitsuba:cornell", "--ideal", "--resolution", "16", "--spp", "16",
+                  "--order", "2", "--kappa", "1,0.5,1", "--denoise", "0")
+    assert result.returncode == 0, result.stderr
+    assert read_image(out / "recolored.exr").shape == (16, 16, 3)
+    headline = re.fullmatch(r"relative error vs ground truth on the surfaces \(ideal path-traced rig, the lamp left "
+                            r"out\): Albedit ([0-9.]+) %, naive per-pixel recolor ([0-9.]+) %", result.stdout.strip())
+    assert headline and float(headline.group(1)) < 25  # percent: 16 spp renders, a 16² box
 
 
 @pytest.mark.parametrize(
@@ -51,6 +67,7 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
         (["capture", "{tmp}/nowhere", "--target", "right_wall"], "no session folder"),
         (["calibrate", "{tmp}/s", "--rig", "nosuch:0"], "unknown rig backend"),
         (["demo", "-o", "{tmp}/d", "--target", "ceiling", "--resolution", "16"], "has no target"),
+        (["demo", "-o", "{tmp}/d", "--rig", "opencv:0"], "must be a rig with ground truth"),
     ],
 )
 def test_bad_input_gives_one_line_errors_and_nonzero_exit(tmp_path, args, message):
@@ -71,3 +88,30 @@ def test_a_calibration_is_reused_across_sessions_of_the_same_rig_only(tmp_path):
     assert other.returncode == 1
     assert "calibration was made for camera 24×24" in other.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "s3").exists()
+
+
+def test_an_edit_saved_by_the_app_exports_from_the_command_line(acquired_doc, tmp_path):
+    from app.cli.main import run_command
+    from app.model import files
+
+    doc = acquired_doc
+    doc.rename_target(doc.by_name("wall").uid, "Wand — links")  # any text a user can type
+    doc.set_kappa(doc.by_name("Wand — links").uid, (2.0, 0.125, 1.5))
+    doc.add_target()  # the app's default name, "target 3", never acquired
+    files.create_session(tmp_path / "s", doc)
+    files.export_image(doc, tmp_path / "app.exr", dtype="float")
+    assert run_command(["export", str(tmp_path / "s"), "-o", str(tmp_path / "cli.exr")]) == 0
+    np.testing.assert_array_equal(read_image(tmp_path / "cli.exr"), read_image(tmp_path / "app.exr"))
+    app_meta, cli_meta = read_metadata(tmp_path / "app.exr"), read_metadata(tmp_path / "cli.exr")
+    assert list(app_meta) == list(cli_meta) == ["edit"]
+    assert cli_meta == app_meta and cli_meta["edit"]["source"] == "synthetic"
+    assert cli_meta["edit"]["cascade"] == ["floor", "Wand — links"] and cli_meta["edit"]["kappa"] == [2.0, 0.125, 1.5]
+    assert [t["name"] for t in cli_meta["edit"]["targets"]] == ["floor", "Wand — links", "target 3"]
+
+
+def test_devices_lists_rigs_and_projectors(capsys):
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    rigs, projectors = out.split("Projectors")
+    assert "virtual:cornell: available" in rigs
+    assert "qtscreen:0: available" in projectors  # the offscreen platform's one screen

@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from app.model import views
 from app.model.display import MAGNITUDE_MAP, false_colour, recolor_rgb32, rgb32_to_rgb, robust_max, to_rgb32
-from app.model.render import DETAIL_VIEWS, Renderer, Request, View, component_grid, preview_factor
+from app.model.render import MaskSnapshot, Request, ViewRenderer, component_grid, preview_factor
+from app.model.views import VIEWS, CanvasView
+
+DETAIL_VIEWS = {spec.view for spec in VIEWS if spec.detail}
 from engine.errors import InputError
 from engine.imageio import to_display
 from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
@@ -58,9 +62,9 @@ def test_area_average_lines_up_with_the_preview_pack(rng, shape, factor):
 @pytest.mark.parametrize("max_shape", [(1080, 1920), (20, 20)])
 def test_recolored_frame_is_the_engines_preview(synthetic, max_shape):
     d, photo = synthetic
-    r = Renderer(photo, d, max_shape=max_shape).prepare()
+    r = ViewRenderer(photo, d, max_shape=max_shape).prepare()
     kappa = (2.0, 0.125, 8.0)
-    frame = r.render(Request(View.RECOLORED, kappa, 0.5))
+    frame = views.render(r, Request(CanvasView.RECOLORED, kappa, 0.5))
     expected = recolor_preview(prepare_preview(d, max_shape), kappa)
     np.testing.assert_array_equal(r.recolored_small(kappa), expected)
     np.testing.assert_array_equal(frame.pixels, to_rgb32(expected, exposure=0.5))  # fused path, bit-exact
@@ -71,27 +75,52 @@ def test_recolored_frame_is_the_engines_preview(synthetic, max_shape):
 
 def test_views_and_fallbacks(synthetic):
     d, photo = synthetic
-    r = Renderer(photo, d, truth=lambda edit: recolor(d, edit[0]) if edit else photo).prepare()
-    split = r.render(Request(View.SPLIT, (2, 2, 2)))
+    r = ViewRenderer(photo, d, truth=lambda edit: recolor(d, edit[0]) if edit else photo).prepare()
+    split = views.render(r, Request(CanvasView.SPLIT, (2, 2, 2)))
     np.testing.assert_array_equal(split.second, to_rgb32(photo))
-    diff = r.render(Request(View.DIFFERENCE, (2, 2, 2)))
+    diff = views.render(r, Request(CanvasView.DIFFERENCE, (2, 2, 2)))
     assert diff.scale is not None and diff.scale.lo == -diff.scale.hi > -np.inf
-    err = r.render(Request(View.ERROR, (2, 2, 2), edit=((2.0, 2.0, 2.0),)))
+    err = views.render(r, Request(CanvasView.ERROR, (2, 2, 2), edit=((2.0, 2.0, 2.0),)))
     assert err.note.startswith("relative error 0.00 %")
-    truth = r.render(Request(View.TRUTH, (1, 1, 1), edit=((3.0, 3.0, 3.0),)))
+    truth = views.render(r, Request(CanvasView.TRUTH, (1, 1, 1), edit=((3.0, 3.0, 3.0),)))
     np.testing.assert_array_equal(truth.linear, recolor(d, 3.0))
-    bare = Renderer(photo).prepare()  # nothing acquired, no truth: everything shows the photograph
-    for view in View:
-        f = bare.render(Request(view, (4, 4, 4)))
+    bare = ViewRenderer(photo).prepare()  # nothing acquired, no truth, no target: the photograph
+    for view in CanvasView:
+        f = views.render(bare, Request(view, (4, 4, 4)))
+        if view == CanvasView.DIFFERENCE:
+            assert f.banner == views.NAIVE_BANNER and f.scale is not None
+            continue
         np.testing.assert_array_equal(f.pixels, to_rgb32(photo))
-        assert f.view in (View.ORIGINAL, View.RECOLORED, View.SPLIT)
+        assert f.view in (CanvasView.ORIGINAL, CanvasView.RECOLORED, CanvasView.SPLIT)
+        assert f.banner == (views.NAIVE_BANNER if f.view != CanvasView.ORIGINAL else "")
+
+
+def test_before_acquisition_the_recolored_view_is_a_naive_recolor_with_a_banner(synthetic):
+    d, photo = synthetic
+    r = ViewRenderer(photo, max_shape=(12, 16)).prepare()
+    first = np.zeros(photo.shape[:2], bool)
+    first[:20, :30] = True
+    second = np.zeros_like(first)
+    second[10:, 20:] = True  # overlaps the first: the later target (cascade order) wins
+    edit = ((MaskSnapshot((1, 0), first), (2.0, 1.0, 0.5)), (MaskSnapshot((2, 0), second), (1.0, 3.0, 1.0)))
+    frame = views.render(r, Request(CanvasView.RECOLORED, edit=edit))
+    scale = np.ones(photo.shape, np.float32)
+    scale[first] = (2.0, 1.0, 0.5)
+    scale[second] = (1.0, 3.0, 1.0)
+    naive = photo * scale
+    np.testing.assert_allclose(r.naive_small(edit), area_average(naive, r.factor), rtol=2e-6, atol=1e-7)
+    assert frame.banner == views.NAIVE_BANNER and "Interreflections follow only once" in frame.banner
+    for x, y in ((0, 0), (25, 15), (40, 40)):
+        label, value = views.readout(r, CanvasView.RECOLORED, x, y, (1, 1, 1), edit)
+        assert label == "naive recolor"
+        np.testing.assert_allclose(value, naive[y, x], rtol=1e-6)
 
 
 def test_components_view_follows_fig6_layout(synthetic):
     d, photo = synthetic
-    r = Renderer(photo, d).prepare()
+    r = ViewRenderer(photo, d).prepare()
     rows, cols = component_grid(d.order, photo.shape[:2], (800, 1200))
-    frame = r.render(Request(View.COMPONENTS, grid=(rows, cols)))
+    frame = views.render(r, Request(CanvasView.COMPONENTS, grid=(rows, cols)))
     assert len(frame.tiles) == d.order and frame.extent == (rows * photo.shape[0], cols * photo.shape[1])
     assert frame.tiles[0].label.startswith("R⁰L_d | L̄_d") and frame.tiles[2].label.endswith("×16")
     # tile 0: L_d on the target, the unreached light elsewhere; tile 1: R¹L_d inside, C R⁰L_d outside
@@ -107,19 +136,19 @@ def test_components_view_follows_fig6_layout(synthetic):
 
 def test_readout_is_exact_at_full_resolution(synthetic):
     d, photo = synthetic
-    r = Renderer(photo, d, truth=FakeTruth(d).recolor, max_shape=(8, 8)).prepare()
+    r = ViewRenderer(photo, d, truth=FakeTruth(d).recolor, max_shape=(8, 8)).prepare()
     kappa = np.array([2.0, 0.5, 3.0])
     full = recolor(d, kappa)
     ys, xs = np.nonzero(d.target)
     for x, y in ((0, 0), (int(xs[3]), int(ys[3])), (photo.shape[1] - 1, photo.shape[0] - 1)):
-        label, value = r.readout(View.RECOLORED, x, y, kappa)
+        label, value = views.readout(r, CanvasView.RECOLORED, x, y, kappa)
         assert label == "recolored"
         np.testing.assert_array_equal(value, full[y, x])
-        label, value = r.readout(View.DIFFERENCE, x, y, kappa)
+        label, value = views.readout(r, CanvasView.DIFFERENCE, x, y, kappa)
         np.testing.assert_array_equal(value, full[y, x] - photo[y, x])
-        assert r.readout(View.ORIGINAL, x, y, kappa)[1] is photo[y, x] or np.array_equal(
-            r.readout(View.ORIGINAL, x, y, kappa)[1], photo[y, x])
-    assert r.readout(View.RECOLORED, -1, 0, kappa) is None
+        assert views.readout(r, CanvasView.ORIGINAL, x, y, kappa)[1] is photo[y, x] or np.array_equal(
+            views.readout(r, CanvasView.ORIGINAL, x, y, kappa)[1], photo[y, x])
+    assert views.readout(r, CanvasView.RECOLORED, -1, 0, kappa) is None
 
 
 def test_preview_factor_and_grid():
@@ -132,15 +161,15 @@ def test_preview_factor_and_grid():
 @pytest.mark.parametrize("view", sorted(DETAIL_VIEWS))
 def test_detail_is_the_full_resolution_frame_cropped(synthetic, view):
     d, photo = synthetic
-    renderer = Renderer(photo, d, max_shape=(12, 16)).prepare()
+    renderer = ViewRenderer(photo, d, max_shape=(12, 16)).prepare()
     assert renderer.factor == 4
     request = Request(view, (2.0, 0.125, 8.0), exposure=0.5)
-    detail = renderer.render_detail(request, (-5, 20, 30, 999))  # clipped to the image
+    detail = views.render_detail(renderer, request, (-5, 20, 30, 999))  # clipped to the image
     assert detail.region == (0, 20, 30, 64) and detail.request == request
     recolored = recolor_rgb32(d, request.kappa, exposure=0.5)[:20, 30:]
     original = to_rgb32(photo, exposure=0.5)[:20, 30:]
-    np.testing.assert_array_equal(detail.pixels, original if view == View.ORIGINAL else recolored)
-    if view == View.SPLIT:
+    np.testing.assert_array_equal(detail.pixels, original if view == CanvasView.ORIGINAL else recolored)
+    if view == CanvasView.SPLIT:
         np.testing.assert_array_equal(detail.second, original)
     else:
         assert detail.second is None
@@ -148,11 +177,41 @@ def test_detail_is_the_full_resolution_frame_cropped(synthetic, view):
 
 def test_no_detail_where_the_preview_is_full_resolution_or_the_view_is_diagnostic(synthetic):
     d, photo = synthetic
-    assert Renderer(photo, d).prepare().render_detail(Request(View.RECOLORED), (0, 10, 0, 10)) is None
-    small = Renderer(photo, d, max_shape=(12, 16)).prepare()
-    for view in set(View) - DETAIL_VIEWS:
-        assert small.render_detail(Request(view), (0, 10, 0, 10)) is None
-    assert small.render_detail(Request(View.RECOLORED), (60, 70, 0, 10)) is None  # outside the image
+    assert views.render_detail(ViewRenderer(photo, d).prepare(), Request(CanvasView.RECOLORED), (0, 10, 0, 10)) is None
+    small = ViewRenderer(photo, d, max_shape=(12, 16)).prepare()
+    diagnostic = {v for v in CanvasView if not views.shown(small, v).detail}
+    assert diagnostic == {CanvasView.DIFFERENCE, CanvasView.COMPONENTS}  # truth views fall back to the original
+    for view in diagnostic:
+        assert views.render_detail(small, Request(view), (0, 10, 0, 10)) is None
+    assert views.render_detail(small, Request(CanvasView.RECOLORED), (60, 70, 0, 10)) is None  # outside the image
     # nothing acquired yet: the recolored view's detail is the photograph
-    bare = Renderer(photo, max_shape=(12, 16)).prepare().render_detail(Request(View.RECOLORED), (0, 10, 0, 10))
+    bare = views.render_detail(ViewRenderer(photo, max_shape=(12, 16)).prepare(), Request(CanvasView.RECOLORED),
+                               (0, 10, 0, 10))
     np.testing.assert_array_equal(bare.pixels, to_rgb32(photo)[:10, :10])
+
+
+def test_noise_view_is_the_engines_predicted_sigma(rng):
+    from dataclasses import replace
+
+    from engine.recolor import recolor_variance
+
+    d, photo = make_decomposition(rng, h=24, w=36, k=3)
+    cov = (rng.random((6,) + d.shape) * 1e-4).astype(np.float32)
+    cov[[1, 2, 4]] *= 0.1  # off-diagonal terms (packed (0,1), (0,2), (1,2)) smaller than the variances
+    d = replace(d, covariance=cov)
+    kappa = (2.0, 0.125, 8.0)
+    full = views.render(ViewRenderer(photo, d).prepare(), Request(CanvasView.NOISE, kappa))
+    np.testing.assert_array_equal(full.linear, np.sqrt(recolor_variance(d, kappa)))
+    assert full.note.startswith("predicted σ on the target: mean") and full.scale.lo == 0 < full.scale.hi
+    r = ViewRenderer(photo, d, max_shape=(8, 12)).prepare()  # factor 3: the mean variance of each block
+    small = views.render(r, Request(CanvasView.NOISE, kappa))
+    expected = np.sqrt(area_average(recolor_variance(d, kappa), 3))
+    whole = area_average(d.target.astype(np.float32), 3)
+    pure = (whole == 0) | (whole == 1)  # blocks wholly on or off the target
+    np.testing.assert_allclose(small.linear[pure], expected[pure], rtol=1e-5)
+    label, value = views.readout(r, CanvasView.NOISE, 20, 12, kappa)
+    assert label == "predicted σ"
+    np.testing.assert_allclose(value, np.sqrt(recolor_variance(d, kappa))[12, 20], rtol=1e-6)
+    plain = views.render(ViewRenderer(photo, replace(d, covariance=None)).prepare(), Request(CanvasView.NOISE, kappa))
+    assert plain.banner == views.NO_NOISE_BANNER
+    np.testing.assert_array_equal(plain.pixels, to_rgb32(photo))

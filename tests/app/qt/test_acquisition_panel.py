@@ -19,6 +19,7 @@ from engine.acquire import CaptureSettings  # noqa: E402
 from engine.acquire.target import pattern_budget  # noqa: E402
 from engine.calibrate import PixelStatus  # noqa: E402
 from engine.session import Session  # noqa: E402
+from engine.session.edit import mask_digest, mask_name  # noqa: E402
 from engine.workflow import load_calibration, load_decomposition, run_calibration  # noqa: E402
 
 RES = 24
@@ -127,7 +128,9 @@ def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_pa
     d = load_decomposition(Session.open(session.path))
     assert d.order == 2
     np.testing.assert_array_equal(d.target, result.targets[-1][1].mask)
-    assert "Captured 2 images" in panel.status.text() and "right_wall: all" in panel.status.text()
+    shots = len(names)  # the bar and the summary count the same camera shots
+    assert f"Captured 2 observation images (0 more predicted) in {shots} camera shots" in panel.status.text()
+    assert panel.eta.bar.format() == f"{shots} / {shots} camera shots" and "right_wall: all" in panel.status.text()
     assert dialogs == [] and not panel.busy and panel.start_button.isEnabled()
 
 
@@ -237,22 +240,26 @@ def test_leave_out_trims_only_the_unreachable_pixels(wedge_offset, make_panel, q
     assert panel.check_ready() == ""
     with qtbot.waitSignal(panel.acquired, timeout=TIMEOUT_MS):
         panel.start_button.click()
-    np.testing.assert_array_equal(Session.open(session.path).read_mask("left"), painted & ~bad)
+    stored = mask_name("left", mask_digest(painted & ~bad))
+    np.testing.assert_array_equal(Session.open(session.path).read_mask(stored), painted & ~bad)
     assert f"{int(bad.sum())} pixels of 'left' the projector cannot reach were left out" in panel.status.text()
     assert dialogs == []
 
 
-def test_progress_shows_count_and_time_left_from_real_captures_only(qtbot):
-    from app.qt.rig_views import ProgressEta
+def test_progress_shows_count_and_time_left(qtbot):
+    from app.qt.worker import JobProgress
 
     now = [100.0]
-    eta = ProgressEta(unit="images", clock=lambda: now[0])
+    eta = JobProgress("p", unit="images", clock=lambda: now[0])
     qtbot.addWidget(eta)
-    eta.update_progress(4, 10, "captured cal-003")  # reused from the session: instant, not a rate
+    eta.update_progress(4, 10, "captured cal-003")
     assert eta.seconds_left is None and eta.bar.format() == "4 / 10 images"
     eta.update_progress(4, 10, "capturing cal-004")
     now[0] += 6.0
     eta.update_progress(7, 10, "capturing cal-007")  # 3 captures in 6 s: 2 s each, 3 to go
     assert eta.seconds_left == pytest.approx(6.0) and "about 6 s left" in eta.label.text()
     assert eta.bar.value() == 7 and eta.bar.maximum() == 10
-
+    for step in range(8, 17):  # instant steps at the start (a resumed run) leave the window
+        now[0] += 1.0
+        eta.update_progress(step, 20, "capturing")
+    assert eta.seconds_left == pytest.approx(4.0)  # 1 s per step, 4 to go

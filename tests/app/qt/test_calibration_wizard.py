@@ -89,6 +89,20 @@ def test_rig_page_greys_out_unavailable_rigs_with_their_reason(make_wizard, monk
     assert "unknown rig backend 'nosuch'" in w.projector_page.status.text()
 
 
+def test_wizard_opens_the_path_traced_rig_like_the_virtual_one(make_wizard, qtbot, tmp_path):
+    pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+    w = make_wizard(rig_name="mitsuba:cornell",
+                    rig_options={"cache_dir": str(tmp_path / "mi"), "spp": 4, "ambient_spp": 8, "coverage_passes": 4})
+    assert w.rig_page.virtual.isEnabled()
+    assert w.rig_page.options() == {"ideal": True, "projector": "coaxial", "resolution": (RES, RES)}
+    w.next()
+    assert w.currentId() == w.PAGE_PROJECTOR and w.projector_page.screens.isHidden()
+    w.next()  # opens the rig on a worker: loading Mitsuba and rendering take longer than the virtual rig
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=4 * TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.exposure_page.live.frames >= 1, timeout=4 * TIMEOUT_MS)
+    assert w.rig.name == "mitsuba:cornell" and w.rig.camera.resolution == (RES, RES)
+
+
 def test_wizard_calibrates_into_a_session_on_workers(make_wizard, qtbot, tmp_path):
     w = make_wizard()
     w.next()
@@ -100,7 +114,7 @@ def test_wizard_calibrates_into_a_session_on_workers(make_wizard, qtbot, tmp_pat
     page = w.exposure_page
     qtbot.waitUntil(lambda: page.live.frames >= 2, timeout=TIMEOUT_MS)
     assert page.grabbed_on and page.grabbed_on != threading.main_thread().name  # grabbed on a worker
-    assert "saturated" in page.report.text() and page.live.saturated_fraction == 0.0
+    assert "does not clip" in page.report.text() and page.live.saturated_fraction == 0.0  # the ideal camera
     page.exposure.setValue(page.exposure.value() / 2)  # the worker applies it to the camera
     qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3),
                     timeout=TIMEOUT_MS)
@@ -273,6 +287,7 @@ def test_auto_exposure_and_identify_on_the_exposure_page(make_wizard, qtbot):
     assert page.level.currentIndex() == 1 and not page.auto_button.isEnabled()
     qtbot.waitUntil(lambda: page.auto is None, timeout=TIMEOUT_MS)
     assert "settled" in page.report.text() and page.auto_button.isEnabled() and page.level.currentIndex() == 0
+    assert page.controller.frames <= 3  # the frames say where the camera clips: one jump, then settled
     qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3), timeout=TIMEOUT_MS)
     white = rig.camera.capture()
     rig.projector.show(np.zeros(rig.projector.resolution + (3,), np.float32))
@@ -283,3 +298,121 @@ def test_auto_exposure_and_identify_on_the_exposure_page(make_wizard, qtbot):
     clip = min(m.full_well, (m.white_level - m.black_level) * m.electrons_per_dn) / (m.electrons_per_radiance * white.exposure)
     assert 0.8 / 1.26 <= np.percentile(white.image.max(axis=-1)[lit], 99.5) / clip <= 0.8 * 1.26
     assert white.saturated[~lit].any()  # the lamp is not projector light: it may clip
+
+
+def test_auto_exposure_settles_at_once_on_a_camera_that_does_not_clip(make_wizard, qtbot):
+    """Defect 6: on the ideal camera Auto ran the exposure up to an hour and reported "ok" over white."""
+    w = make_wizard()
+    w.next()
+    w.next()
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=TIMEOUT_MS)
+    page = w.exposure_page
+    before = page.exposure.value()
+    page.auto_button.click()
+    qtbot.waitUntil(lambda: page.auto is None, timeout=TIMEOUT_MS)
+    assert page.controller.frames == 1 and page.exposure.value() == before
+    assert "does not clip" in page.report.text() and np.isclose(w.rig.camera.exposure * 1000, before)
+    # the picture is the same at any exposure: a long one does not turn it white
+    image = page.live._image
+    page.exposure.setValue(before * 64)
+    frames = page.live.frames
+    qtbot.waitUntil(lambda: page.live.frames > frames + 1, timeout=TIMEOUT_MS)
+    assert page.live._image == image
+
+
+def test_live_view_runs_again_after_back_and_enter_does_not_leave_the_page(make_wizard, qtbot):
+    """Defect 7: the live view froze after Next → Back; Enter in the exposure box went to the next page."""
+    from tests.app.qt.user import User
+
+    w = make_wizard()
+    user = User(qtbot, w)
+    w.next()
+    w.next()
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=TIMEOUT_MS)
+    page = w.exposure_page
+    qtbot.waitUntil(lambda: page.live.frames >= 1, timeout=TIMEOUT_MS)
+    user.type_into("wizard_exposure", "12.5")  # typed, then Enter
+    assert w.currentId() == w.PAGE_EXPOSURE and page.exposure.value() == 12.5
+    qtbot.waitUntil(lambda: np.isclose(w.rig.camera.exposure, 0.0125), timeout=TIMEOUT_MS)
+    user.click("wizard_next")
+    assert w.currentId() == w.PAGE_CALIBRATE
+    user.click("wizard_back")
+    frames = page.live.frames
+    qtbot.waitUntil(lambda: page.live.frames >= frames + 2, timeout=TIMEOUT_MS)  # live again
+
+
+def test_the_main_window_wizard_starts_from_the_document_and_remembers(make_window, qtbot, tmp_path, monkeypatch):
+    """Defect 5: the wizard ignored the open document, showed a repr, left empty folders behind."""
+    from PySide6.QtWidgets import QWizard
+
+    from app.model.document import Document
+    from tests.app.qt.user import User
+
+    window = make_window(Document(np.full((RES, RES + 8, 3), 0.2, np.float32)))
+    user = User(qtbot, window)
+    monkeypatch.setattr(CalibrationWizard, "default_session_path", lambda self: tmp_path / "new-session")
+    user.trigger("calibrate")
+    w = window.findChild(QWizard, "calibration_wizard")
+    assert (w.rig_page.res_h.value(), w.rig_page.res_w.value()) == (RES, RES + 8)  # the document's resolution
+    w.rig_page.res_w.setValue(RES)
+    w.rig_page.ideal.setChecked(True)
+    w.next()
+    w.next()
+    qtbot.waitUntil(lambda: w.currentId() == w.PAGE_EXPOSURE, timeout=TIMEOUT_MS)
+    assert (tmp_path / "new-session" / "manifest.json").exists()
+    w.reject()  # nothing captured: the folder it made goes
+    assert not (tmp_path / "new-session").exists() and window.rig is None
+    qtbot.waitUntil(lambda: window.findChild(QWizard, "calibration_wizard") is None)  # closed wizards are deleted
+
+    user.trigger("calibrate")
+    w = window.findChild(QWizard, "calibration_wizard")
+    assert w.rig_page.res_w.value() == RES + 8  # the document's resolution again
+    w.rig_page.res_w.setValue(RES)
+    _to_calibration_page(w, qtbot)
+    with qtbot.waitSignal(w.calibrated, timeout=TIMEOUT_MS):
+        w.calibration_page.start.click()
+    qtbot.waitUntil(w.calibration_page.isComplete, timeout=TIMEOUT_MS)
+    w.next()
+    w.next()
+    w.button(QWizard.WizardButton.FinishButton).click()
+    qtbot.waitUntil(lambda: window.findChild(QWizard, "calibration_wizard") is None)
+    assert window.rig is not None and window.rig.camera.resolution == (RES, RES)  # kept open for acquiring
+    assert window.session is not None and load_calibration(window.session) is not None
+    assert window.act_close_rig.isEnabled() and window.act_acquire.isEnabled()
+    assert window.settings.value("wizard/res_w") in (RES, str(RES))  # remembered
+
+    user.trigger("calibrate")  # now the open rig: named in words, no Python repr
+    w = window.findChild(QWizard, "calibration_wizard")
+    assert w.rig_page.given.text() == (f"Using the rig that is open: virtual:cornell — camera {RES}×{RES}, "
+                                       f"projector {RES}×{RES}.")
+    assert w.rig_page.rigs.isHidden() and w.rig_page.rigs_label.isHidden()
+    w.reject()
+    assert window.rig is not None  # the wizard never closes a rig it was given
+
+
+@pytest.mark.parametrize(
+    "name, words",
+    [
+        ("gphoto2", "opening the camera failed: no camera found: check that it is connected by USB"),
+        ("harvesters:/no/such/maker.cti", "no GenTL producer file at '/no/such/maker.cti'"),
+        ("opencv:97", "no camera at index 97 (not attached, or in use by another program)"),
+    ],
+)
+def test_a_camera_that_cannot_open_is_shown_in_the_engines_words(make_wizard, name, words):
+    """The real libraries' failures with no device reach the wizard as one plain message."""
+    if name == "gphoto2":
+        from devices.gphoto2_camera import list_cameras
+        from engine.errors import DeviceError
+
+        try:
+            attached = list_cameras()
+        except DeviceError:  # python-gphoto2 not installed: the wizard says so instead
+            attached, words = [], "python-gphoto2 is not installed"
+        if attached:
+            pytest.skip("a camera is connected to this machine")
+    w = make_wizard()
+    w.rig_page.rig_name.setText(name)
+    w.next()
+    w.next()  # opening fails: the wizard stays on the projector page with the message
+    assert w.currentId() == w.PAGE_PROJECTOR and w.rig is None
+    assert words in w.projector_page.status.text()

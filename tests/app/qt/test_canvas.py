@@ -90,7 +90,7 @@ def test_wheel_zooms_around_the_cursor_and_fit(window, qtbot):
     assert c.zoom == pytest.approx(ZOOM * 1.5625)
     after = c.to_image(anchor)
     assert (after.x(), after.y()) == pytest.approx((before.x(), before.y()))
-    window.act_100.trigger()
+    window.act_zoom_100.trigger()
     assert c.zoom == 1.0
     window.act_fit.trigger()
     assert c.zoom == pytest.approx(min(c.width() / 60, c.height() / 40))
@@ -109,7 +109,7 @@ def test_brush_size_keys_polygon_enter_and_cursor_readout(window, qtbot):
     mask = window.doc.target(window.doc.current).mask
     assert mask[3, 18] and not mask[11, 3]
     qtbot.mouseMove(c, _widget(18.5, 3.5))
-    assert window.readout.text().startswith("x    18  y     3") and "original: R 0.25" in window.readout.text()
+    assert window.readout.text().startswith("x    18  y     3") and "naive recolor: R 0.25" in window.readout.text()
     assert "[a]" in window.readout.text()
 
 

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from app.model import files
 from app.model.demo import DEMO_KAPPA, open_demo
-from app.model.render import View
+from app.model.views import CanvasView
 from engine import imageio
 from engine.recolor import recolor
 
@@ -16,15 +18,16 @@ RIG = {"resolution": (48, 48), "cache_dir": False}
 
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
-    doc, rig, session = open_demo(folder=tmp_path_factory.mktemp("demo"), **RIG)
-    yield doc, rig, session
-    rig.close()
+    d = open_demo(folder=tmp_path_factory.mktemp("demo"), **RIG)
+    yield d.document, d.rig, d.session
+    d.rig.close()
 
 
 def test_demo_acquires_the_right_wall_like_fig6(demo):
     doc, rig, session = demo
     assert [t.name for t in doc.targets][-1] == "right_wall" and set(rig.targets) == {t.name for t in doc.targets}
     wall = doc.by_name("right_wall")
+    assert [t.name for t in doc.acquisition_targets()] == ["right_wall"]  # the others are painted for reference
     np.testing.assert_array_equal(wall.kappa, DEMO_KAPPA)
     assert doc.acquisition.cascade == (wall.uid,) and not doc.is_dirty()
     assert doc.unreachable is not None and doc.unreachable.shape == doc.shape
@@ -58,25 +61,51 @@ def test_demo_session_reopens_with_its_acquisition(demo):
     np.testing.assert_array_equal(reopened.decomposition.components, doc.decomposition.components)
 
 
-def test_window_demo_saves_a_copy_and_cleans_up(make_window, tmp_path, monkeypatch):
+def test_window_demo_saves_a_copy_and_reuses_its_cached_session(make_window, tmp_path, monkeypatch):
+    """Defect 12: the demo's session lives in the cache folder and is reused; Save As copies it."""
     import app.model.demo
 
     real = app.model.demo.open_demo
-    monkeypatch.setattr(app.model.demo, "open_demo", lambda name, **kw: real(name, **RIG, **kw))
+    monkeypatch.setattr(app.model.demo, "open_demo", lambda name, **kw: real(name, **dict(kw, **RIG)))
     w = make_window()
     w.open_demo()
-    assert w.doc is not None and w.scratch is not None and w.scratch.exists()
-    scratch = w.scratch
-    assert "demo (not saved)" in w.windowTitle() and w.rig is not None
-    w.set_view(View.ERROR)
+    assert w.doc is not None and w.demo and w.session is not None and w.rig is not None
+    cached = Path(w.session.path)
+    assert cached.parent.name == "demo" and str(tmp_path) not in str(cached)  # the (test's) user cache folder
+    taken = {c.name: c.sha256 for c in w.session.captures}
+    assert "demo (not saved)" in w.windowTitle()
+    w.set_view(CanvasView.ERROR)
     assert w.canvas.frame.note.startswith("relative error") and "without the lamp" in w.canvas.frame.note
-    assert w.save_as(tmp_path / "kept")
-    assert not scratch.exists() and w.scratch is None
+    from PySide6.QtWidgets import QFileDialog
+
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(tmp_path / "kept"), "")))
+    assert w.save()  # the demo's Save is a Save As: the cached session stays as it was
     doc, session, _ = files.open_document(tmp_path / "kept")
     assert any(c.meta.get("kind") == "photograph" for c in session.captures)
     np.testing.assert_array_equal(doc.by_name("right_wall").kappa, DEMO_KAPPA)
+    assert not w.demo and Path(w.session.path) == tmp_path / "kept" and cached.exists()
     w.export(tmp_path / "fig6.exr", dtype="float")
     np.testing.assert_array_equal(imageio.read_image(tmp_path / "fig6.exr"), recolor(w.doc.decomposition, DEMO_KAPPA))
+    w.open_demo()  # a second start: the same session, nothing captured again
+    assert Path(w.session.path) == cached and {c.name: c.sha256 for c in w.session.captures} == taken
+
+
+def test_old_demo_sessions_are_pruned(tmp_path):
+    import os
+
+    from app.model.demo import KEEP
+
+    d = open_demo(folder=tmp_path, acquire=True, **RIG)
+    d.rig.close()
+    used = Path(d.session.path)
+    for i in range(3):  # sessions of other set-ups, older
+        old = tmp_path / f"demo-cornell-{i:016d}"
+        old.mkdir()
+        os.utime(old, (1000 + i, 1000 + i))
+    d = open_demo(folder=tmp_path, **RIG)
+    d.rig.close()
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert len(left) == KEEP and used.name in left and "demo-cornell-0000000000000002" in left
 
 
 _MAIN_SCRIPT = """

@@ -9,7 +9,7 @@ from PySide6.QtWidgets import QMessageBox
 from app.model import files
 from app.model.display import to_rgb32
 from app.model.document import Document
-from app.model.render import View
+from app.model.views import CanvasView
 from app.qt.panels import kappa_to_ticks
 from engine import imageio
 from engine.recolor import prepare_preview, recolor, recolor_preview
@@ -68,27 +68,27 @@ def test_earlier_cascade_target_is_locked_with_a_reason(make_window, acquired_do
     np.testing.assert_array_equal([panel.spins[c].value() for c in range(3)], [0.5, 1.0, 1.0])
     acquired_doc.set_current(acquired_doc.by_name("wall").uid)
     assert all(s.isEnabled() for s in panel.sliders) and "Last target" in panel.note.text()
-    assert not w.act_clear.isEnabled()  # acquired masks are fixed too
+    assert not w.act_clear_mask.isEnabled()  # acquired masks are fixed too
 
 
 def test_views_are_offered_when_they_make_sense(make_window, synthetic, acquired_doc):
     d, photo = synthetic
     bare = make_window(Document(photo))
     enabled = {v for v, a in bare.view_actions.items() if a.isEnabled()}
-    assert enabled == {View.RECOLORED, View.ORIGINAL, View.SPLIT}
+    assert enabled == {CanvasView.RECOLORED, CanvasView.ORIGINAL, CanvasView.SPLIT, CanvasView.DIFFERENCE}
     assert not bare.act_export.isEnabled()
     w = make_window(acquired_doc)
     assert all(a.isEnabled() for a in w.view_actions.values())
-    w.set_view(View.TRUTH)
+    w.set_view(CanvasView.TRUTH)
     wall = acquired_doc.by_name("wall")
     acquired_doc.set_kappa(wall.uid, 2.0)
     np.testing.assert_array_equal(w.canvas.frame.linear, recolor(d, 2.0))
-    w.set_view(View.ERROR)
+    w.set_view(CanvasView.ERROR)
     assert w.canvas.frame.note.startswith("relative error 0.00 %") and w.canvas.frame.scale is not None
-    w.set_view(View.COMPONENTS)
+    w.set_view(CanvasView.COMPONENTS)
     assert len(w.canvas.frame.tiles) == d.order
     acquired_doc.discard_acquisition()
-    assert w.preview.view == View.RECOLORED and not w.view_actions[View.COMPONENTS].isEnabled()
+    assert w.preview.view == CanvasView.RECOLORED and not w.view_actions[CanvasView.COMPONENTS].isEnabled()
 
 
 @pytest.mark.parametrize(
@@ -159,7 +159,7 @@ def test_save_and_reopen_restores_the_edit(make_window, acquired_doc, tmp_path):
     # save again into the same session, then reopen in the window through recent files
     acquired_doc.rename_target(extra.uid, "renamed")
     assert w.save() and not acquired_doc.is_dirty()
-    assert w._recent()[0] == str((tmp_path / "s").resolve())
+    assert w.files.recent()[0] == str((tmp_path / "s").resolve())
     assert w.open_path(tmp_path / "s")
     assert [t.name for t in w.doc.targets] == ["floor", "wall", "renamed"]
 
@@ -185,13 +185,15 @@ def test_failed_save_loses_nothing(make_window, acquired_doc, tmp_path, monkeypa
     assert doc.by_name("wall").kappa[0] == 3.0
 
 
-def test_unsaved_changes_prompt_on_quit(make_window, acquired_doc, tmp_path, dialogs):
+def test_unsaved_changes_prompt_on_quit(make_window, acquired_doc, tmp_path, dialogs, monkeypatch):
     w = make_window(acquired_doc)
     acquired_doc.set_kappa(acquired_doc.by_name("wall").uid, 2.0)
     dialogs.answers = [Button.Cancel]
     assert not w.close() and w.isVisible() and acquired_doc.is_dirty()
     dialogs.answers = [Button.Save]
-    w.save_as = lambda: w._save_into(None, tmp_path / "saved")  # the file dialog's answer
+    from PySide6.QtWidgets import QFileDialog
+
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(tmp_path / "saved"), "")))
     assert w.close()
     assert [k for k, _, _ in dialogs.shown].count("unsaved") == 2
     doc, _, _ = files.open_document(tmp_path / "saved")
@@ -212,7 +214,7 @@ def test_real_unsaved_prompt_offers_save_discard_cancel(make_window, acquired_do
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
-    from app.qt.main_window import MainWindow
+    from app.qt.file_control import FileControl
 
     monkeypatch.undo()  # the genuine dialog this time
     w = make_window(acquired_doc)
@@ -224,7 +226,7 @@ def test_real_unsaved_prompt_offers_save_discard_cancel(make_window, acquired_do
         box.button(Button.Cancel).click()
 
     QTimer.singleShot(50, answer)
-    assert MainWindow.ask_unsaved(w) == Button.Cancel
+    assert FileControl.ask_unsaved(w.files) == Button.Cancel
     assert len(seen["buttons"]) == 3 and {"Cancel", "Save"} <= set(seen["buttons"])
 
 
@@ -242,7 +244,7 @@ def test_acquire_refuses_unreachable_pixels(make_window, dialogs):
     w = make_window(doc, rig=Rig())
     doc.paint(t.uid, (12, 14, 0, 2), np.ones((2, 2), bool), True)
     assert "not reachable by the projector" in w.statusBar().currentMessage()
-    w.acquire()
+    w.act_acquire.trigger()
     assert "cannot reach" in dialogs.texts("critical")[-1] and "54 px" in dialogs.texts("critical")[-1]
     red = np.uint32(0xF0F00000)
     assert (w.canvas._overlay[:10, :5] == red).any() and not (w.canvas._overlay[:, 10:] == red).any()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from app.model.display import to_rgb32
-from app.model.render import View
+from app.model.views import CanvasView
 from app.qt.preview import PreviewController
 from app.qt.worker import Job, LatestWorker, UiCaller, on_ui_thread
 from engine.errors import Cancelled
@@ -69,7 +69,7 @@ def test_preview_follows_kappa_of_the_last_cascade_target(qtbot, acquired_doc):
     n = preview.frame.request_id
     doc.set_kappa(doc.add_target("unacquired").uid, 5.0)  # not in the cascade: no new frame
     assert preview.frame.request_id == n
-    preview.set_view(View.TRUTH)  # ground truth depends on every target's κ and mask
+    preview.set_view(CanvasView.TRUTH)  # ground truth depends on every target's κ and mask
     calls = doc.truth.calls
     doc.set_kappa(doc.by_name("unacquired").uid, 4.0)
     assert preview.frame.request_id > n and doc.truth.calls == calls  # empty mask: same edit, cached

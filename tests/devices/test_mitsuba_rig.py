@@ -1,0 +1,172 @@
+"""The path-traced rig (``mitsuba:``): protocols, radiometry against the virtual rig, truth per shape.
+
+Renders are tiny (16²–32², a few dozen samples per pixel) so the module runs in seconds.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+import devices
+from engine.errors import InputError
+
+mi = pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+
+SMALL = dict(resolution=(24, 24), spp=32, ambient_spp=64, truth_spp=64, coverage_passes=32, cache_dir=False)
+
+
+@pytest.fixture(scope="module")
+def rig():
+    with devices.open_rig("mitsuba:cornell", ideal=True, **SMALL) as r:
+        yield r
+
+
+@pytest.fixture(scope="module")
+def virtual():
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(24, 24), cache_dir=False) as r:
+        yield r
+
+
+def test_rig_implements_the_protocols_and_records_spp(rig):
+    assert isinstance(rig.camera, devices.Camera) and isinstance(rig.projector, devices.Projector)
+    frame = rig.camera.capture()
+    assert frame.image.shape == (24, 24, 3) and frame.image.dtype == np.float32
+    assert frame.metadata["spp"] == 32 and frame.metadata["ambient_spp"] == 64
+    assert rig.projector.resolution == (24, 24)
+
+
+def test_targets_and_coverage_follow_the_virtual_geometry(rig, virtual):
+    for name in ("right_wall", "left_wall"):
+        ours, theirs = rig.targets[name], virtual.targets[name]
+        iou = (ours & theirs).sum() / (ours | theirs).sum()
+        assert iou > 0.85, (name, iou)
+    cov = rig.coverage["right_wall"]
+    assert cov.dtype == np.float32 and cov.min() >= 0 and cov.max() <= 1
+    edge = (cov > 0) & (cov < 1)
+    assert edge.any() and (edge & ~rig.targets["right_wall"]).any()  # mixed pixels, as on a sensor
+    lamp = rig.truth.emitters()
+    assert lamp.any() and not (virtual.truth.emitters() & ~lamp).any()
+
+
+def test_radiometry_matches_the_virtual_rig_on_direct_light(rig, virtual):
+    """Same projector power, same albedo: the direct image agrees pixel for pixel (interior)."""
+    d_mi = rig.truth.direct()
+    d_v = virtual.truth.direct()
+    solid = np.zeros_like(rig.targets["right_wall"])
+    for name in ("right_wall", "left_wall"):
+        solid |= (rig.coverage[name] == 1) & virtual.targets[name]
+    ratio = np.median(d_mi[solid] / d_v[solid], axis=0)
+    np.testing.assert_allclose(ratio, 1.0, atol=0.03)
+
+
+def test_coaxial_projector_lights_the_same_camera_pixels(rig):
+    rig.ambient = False
+    try:
+        pattern = np.zeros((24, 24, 3), np.float32)
+        pattern[6:10, 14:18] = 1.0
+        rig.projector.show(pattern)
+        lit = rig.camera.capture().image.sum(axis=-1)
+    finally:
+        rig.ambient = True
+        rig.blank()
+    assert lit[6:10, 14:18].min() > 5 * np.median(lit)
+    ys, xs = np.unravel_index(np.argsort(lit, axis=None)[-16:], lit.shape)
+    assert set(ys) <= set(range(6, 10)) and set(xs) <= set(range(14, 18))
+
+
+def test_captures_draw_new_noise_and_add_the_cached_ambient_light(rig):
+    rig.projector.show(np.full((24, 24, 3), 0.5, np.float32))
+    a, b = rig.camera.capture().image, rig.camera.capture().image
+    rig.blank()
+    dark = rig.camera.capture().image
+    assert not np.array_equal(a, b)
+    np.testing.assert_array_equal(dark, rig.renderer.ambient_image())
+    assert abs(float(a.mean() / b.mean()) - 1) < 0.05
+
+
+def test_truth_recolors_shapes_including_their_mixed_pixels(rig):
+    mask = rig.targets["right_wall"]
+    kappa = np.array([2.0, 0.125, 8.0])
+    photo = rig.truth.photograph()
+    truth = rig.truth.recolor([(mask, kappa)])
+    cov = rig.coverage["right_wall"]
+    solid = cov == 1
+    ratio = np.median(truth[solid] / photo[solid], axis=0)
+    assert ratio[1] < 0.3 and ratio[2] > 4  # green wall → blue
+    edge = (cov > 0.2) & (cov < 0.8) & ~mask  # unpainted edge pixels still change (the truth is per shape)
+    assert edge.any()
+    assert np.median(truth[edge][:, 2] / photo[edge][:, 2]) > 1.5
+    assert rig.truth.shapes_of(mask) == ["right_wall"]
+    with pytest.raises(InputError, match="covers no shape"):
+        rig.truth.recolor([(np.zeros_like(mask), 2.0)])
+    with pytest.raises(InputError, match="interaction components"):
+        rig.truth.components(mask, 3)
+
+
+def test_a_scene_lit_by_the_projector_alone_has_a_black_ambient_image():
+    with devices.open_rig("mitsuba:floor", ideal=True, **SMALL) as r:
+        assert not r.renderer.ambient_image().any()
+        r.flood()
+        assert r.camera.capture().image.mean() > 0
+
+
+def test_ambient_render_is_cached_on_disk(tmp_path):
+    opts = dict(SMALL, cache_dir=tmp_path, resolution=(12, 12))
+    with devices.open_rig("mitsuba:cornell", ideal=True, **opts) as r1:
+        first = r1.renderer.ambient_image()
+    with devices.open_rig("mitsuba:cornell", ideal=True, **opts) as r2:
+        again = r2.renderer.ambient_image()
+        assert r2.renderer.renders == 0
+    np.testing.assert_array_equal(first, again)
+    assert len(list(tmp_path.glob("cornell-ambient-*.npy"))) == 1
+
+
+def test_glossy_coat_is_a_parameter_and_bad_options_are_named():
+    with devices.open_rig("mitsuba:wedge", ideal=True, specular=0.2, roughness=0.05, **SMALL) as r:
+        assert r.renderer.materials == {"left_wall": {"specular": 0.2, "roughness": 0.05}}
+        assert r.targets["left"].any()
+    with pytest.raises(InputError, match="specular must be in"):
+        devices.open_rig("mitsuba:wedge", specular=1.5, **SMALL)
+    with pytest.raises(InputError, match="needs a rig scene with a glossy coat"):
+        devices.open_rig("mitsuba:cornell", specular=0.1, **SMALL)
+    with pytest.raises(InputError, match="unknown mitsuba rig option"):
+        devices.open_rig("mitsuba:cornell", spp_per_pixel=3)
+    with pytest.raises(InputError, match="unknown mitsuba rig scene"):
+        devices.open_rig("mitsuba:nowhere")
+
+
+def test_any_mitsuba_xml_scene_with_a_targets_file(tmp_path):
+    (tmp_path / "box.xml").write_text("""<scene version="3.0.0">
+  <sensor type="perspective"><float name="fov" value="50"/>
+    <transform name="to_world"><lookat origin="0,0,-3" target="0,0,0" up="0,1,0"/></transform></sensor>
+  <shape type="rectangle" id="wall"><bsdf type="diffuse"><rgb name="reflectance" value="0.2,0.6,0.3"/></bsdf></shape>
+  <shape type="rectangle" id="floor">
+    <transform name="to_world"><rotate x="1" angle="-90"/><translate y="-1" z="-1"/></transform>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.7"/></bsdf></shape>
+  <emitter type="point"><point name="position" x="0" y="2" z="-2"/><rgb name="intensity" value="5"/></emitter>
+</scene>""")
+    (tmp_path / "box.json").write_text('{"scene": "box.xml", "targets": {"wall": ["wall"]}}')
+    with devices.open_rig(f"mitsuba:{tmp_path / 'box.json'}", ideal=True, **SMALL) as r:
+        assert r.targets["wall"].sum() > 50
+        lamp_only = r.camera.capture().image
+        r.ambient = False
+        assert r.camera.capture().image.max() == 0  # the point light is the only ambient light
+        r.ambient = True
+        r.projector.show(np.ones((24, 24, 3), np.float32))
+        assert r.camera.capture().image.mean() > lamp_only.mean()
+    (tmp_path / "bad.json").write_text('{"scene": "box.xml", "targets": {"wall": ["nope"]}}')
+    with pytest.raises(InputError, match="not in"):
+        devices.open_rig(f"mitsuba:{tmp_path / 'bad.json'}", **SMALL)
+
+
+def test_available_lists_the_rig_or_says_how_to_install_it(monkeypatch):
+    names = {a.name: a for a in devices.available()}
+    assert names["mitsuba:cornell"].ok
+    monkeypatch.setitem(sys.modules, "mitsuba", None)
+    from devices import mitsuba as backend
+
+    (entry,) = backend.probe()
+    assert not entry.ok and "pip install 'albedit[mitsuba]'" in entry.reason

@@ -1,0 +1,114 @@
+"""engine.edge: soft masks, refining a hard mask, recoloring pixels that are partly target."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.decompose import Decomposition
+from engine.edge import blend_edges, check_coverage, edge, refine_mask, solid
+from engine.errors import InputError
+from engine.recolor import recolor
+
+A = np.array([0.1, 0.8, 0.1], np.float32)  # target colour
+B = np.array([0.7, 0.65, 0.6], np.float32)  # neighbour colour
+
+
+def _two_sides(h=12, w=14, seed=0):
+    """A vertical edge: target on the right, with true coverage ``alpha`` on column 6."""
+    rng = np.random.default_rng(seed)
+    alpha = np.zeros((h, w), np.float32)
+    alpha[:, 7:] = 1.0
+    alpha[:, 6] = rng.uniform(0.05, 0.95, h)
+    photo = (alpha[:, :, None] * A + (1 - alpha[:, :, None]) * B).astype(np.float32)
+    return alpha, photo
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_refine_mask_recovers_the_coverage_of_mixed_pixels(dtype):
+    alpha, photo = _two_sides()
+    painted = alpha >= 0.5
+    cov = refine_mask(painted, photo.astype(dtype), snap=0.0)
+    assert cov.dtype == np.float32
+    np.testing.assert_allclose(cov, alpha, atol=1e-5)
+    snapped = refine_mask(painted, photo.astype(dtype))  # within 0.1 of 0 or 1: exactly 0 or 1
+    np.testing.assert_array_equal(snapped[alpha <= 0.1], 0)
+    np.testing.assert_array_equal(snapped[alpha >= 0.9], 1)
+    assert solid(cov).sum() == (alpha == 1).sum() and edge(cov).sum() == edge(alpha).sum()
+
+
+def test_refine_mask_follows_a_linear_shading_gradient():
+    alpha, photo = _two_sides()
+    ramp = np.linspace(0.6, 1.4, photo.shape[1], dtype=np.float32)[None, :, None]
+    shaded = (alpha[:, :, None] * A + (1 - alpha[:, :, None]) * B) * ramp  # both sides shaded alike
+    cov = refine_mask(alpha >= 0.5, shaded.astype(np.float32), snap=0.0)
+    np.testing.assert_allclose(cov[:, 6], alpha[:, 6], atol=0.03)
+
+
+def test_refine_mask_keeps_pixels_without_contrast_and_far_from_the_edge():
+    photo = np.full((8, 8, 3), 0.5, np.float32)
+    m = np.zeros((8, 8), bool)
+    m[:, 4:] = True
+    np.testing.assert_array_equal(refine_mask(m, photo), m.astype(np.float32))
+
+
+def _decomposition(order=3, h=12, w=14):
+    """Two flat sides with known interaction shares, and an edge column mixing them."""
+    alpha, photo = _two_sides(h, w)
+    s_in = np.array([0.7, 0.2, 0.1])[:order] / np.array([0.7, 0.2, 0.1])[:order].sum()
+    s_out = np.array([0.6, 0.3, 0.1])[:order] / np.array([0.6, 0.3, 0.1])[:order].sum()  # [L̄_d, C R^0, C R^1]
+    target = alpha >= 1
+    comps = np.zeros((order, h, w, 3), np.float32)
+    unreached = np.zeros((h, w, 3), np.float32)
+    comps[:, target] = s_in[:, None, None] * A
+    out = alpha <= 0
+    unreached[out] = s_out[0] * B
+    for i in range(order - 1):
+        comps[i, out] = s_out[i + 1] * B
+    # the edge column is not re-emitted: its non-target decomposition (Eq. 9) holds its target
+    # part one interaction late (L̄_d = R^0 L_d, C R^m L_d = R^{m+1} L_d) plus its neighbour's
+    col = ~target & ~out
+    a = alpha[col][:, None]
+    unreached[col] = a * A * s_in[0] + (1 - a) * B * s_out[0]
+    for m in range(order - 1):
+        comps[m, col] = a * A * s_in[m + 1] + (1 - a) * B * s_out[m + 1]
+    return Decomposition(comps, unreached, target), alpha, photo, s_in, s_out
+
+
+def test_blend_edges_recolors_each_side_with_its_own_shares():
+    d, alpha, photo, s_in, s_out = _decomposition()
+    blended, changed = blend_edges(d, alpha, photo)
+    np.testing.assert_array_equal(changed, edge(alpha))
+    kappa = np.array([2.0, 0.125, 8.0])
+    f_a = sum(kappa ** (i + 1) * s for i, s in enumerate(s_in))
+    f_b = s_out[0] + sum(kappa ** (i + 1) * s for i, s in enumerate(s_out[1:]))
+    expected = alpha[:, :, None] * A * f_a + (1 - alpha[:, :, None]) * B * f_b
+    got = recolor(blended, kappa)
+    np.testing.assert_allclose(got, expected, rtol=2e-5, atol=1e-6)
+    np.testing.assert_allclose(recolor(blended, 1.0), photo, rtol=1e-5, atol=1e-7)  # κ = 1: the photograph
+    # decomposed as non-target, the edge's target part misses one κ: the seam
+    assert np.abs(recolor(d, kappa)[changed] - expected[changed]).max() > 0.1
+
+
+def test_blend_edges_leaves_hard_masks_and_lonely_edges_alone():
+    d, alpha, photo, *_ = _decomposition()
+    same, changed = blend_edges(d, alpha >= 0.5, photo)
+    assert same is d and not changed.any()
+    lonely = np.zeros_like(alpha)
+    lonely[0, 0] = 0.5  # no target pixel within the radius
+    _, changed = blend_edges(d, lonely, photo, radius=1)
+    assert not changed.any()
+
+
+def test_bad_input_names_the_argument():
+    d, alpha, photo, *_ = _decomposition()
+    with pytest.raises(InputError, match="coverage must be finite and in"):
+        blend_edges(d, alpha * 2, photo)
+    with pytest.raises(InputError, match="radius must be"):
+        blend_edges(d, alpha, photo, radius=0)
+    with pytest.raises(InputError, match="photograph must have"):
+        blend_edges(d, alpha, photo[:-1])
+    with pytest.raises(InputError, match="boolean mask or float coverage"):
+        check_coverage("m", np.ones((2, 2), np.uint8), (2, 2))
+    with pytest.raises(InputError, match="mask must be a boolean"):
+        refine_mask(alpha, photo)
