@@ -30,6 +30,7 @@ from engine.calibrate import Calibration
 from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
+from engine.progress import report
 from engine.recolor import recolor
 from engine.session.edit import mask_digest, mask_name
 from engine.session.paths import NAME
@@ -381,6 +382,9 @@ def acquire_cascade(
         {"index": i + 1, **e} for i, e in enumerate(plan.log) if e["source"] != "computed"
     ]
     acquisition = Acquisition(obs, prepared[last], base.image, plan.clamped, acq_log, covariance)
+    # negative noise split off only where there was some: fewer shots than planned, the count is final
+    recorder.planned = recorder.count
+    report(recorder.progress, recorder.count, recorder.planned, "acquisition done")
     return CascadeResult(
         acquisition=acquisition,
         targets=list(zip(names, prepared)),

@@ -85,11 +85,10 @@ def test_realistic_rig_recolors_within_bound(rig, tmp_path):
         floor = _error(photo, r.truth.photograph())  # camera noise alone, at kappa = 1
         naive = np.where(mask[:, :, None], photo * kappa.astype(np.float32), photo)
         print(f"realistic: ours {_error(out, truth):.4f}, naive {_error(naive, truth):.4f}, noise floor {floor:.4f}")
-        # measured: ours 1.68 %, naive 2.20 %, floor 0.65 % (48x48, 8 frames, supersampled rig; the
-        # decomposition weighted by the noise model; unweighted 1.57 %): the rig's systematic error,
-        # not its noise, dominates at this kappa
+        # measured: ours 1.42 %, naive 2.20 %, floor 0.65 % (48x48, 8 frames, supersampled rig with a
+        # half-resolution projector; the decomposition weighted by the noise model; unweighted 1.43 %)
         assert _error(out, truth) < 0.85 * _error(naive, truth)
-        assert _error(out, truth) < 2.75 * floor
+        assert _error(out, truth) < 2.5 * floor
 
 
 def test_offset_projector_decodes_true_correspondences_and_reports_shadows(rig, tmp_path):

@@ -180,7 +180,7 @@ def test_no_detail_where_the_preview_is_full_resolution_or_the_view_is_diagnosti
     assert views.render_detail(ViewRenderer(photo, d).prepare(), Request(CanvasView.RECOLORED), (0, 10, 0, 10)) is None
     small = ViewRenderer(photo, d, max_shape=(12, 16)).prepare()
     diagnostic = {v for v in CanvasView if not views.shown(small, v).detail}
-    assert diagnostic == {CanvasView.DIFFERENCE, CanvasView.COMPONENTS}  # truth views fall back to the original
+    assert diagnostic == {CanvasView.DIFFERENCE, CanvasView.COMPONENTS, CanvasView.NOISE}  # truth views: the original
     for view in diagnostic:
         assert views.render_detail(small, Request(view), (0, 10, 0, 10)) is None
     assert views.render_detail(small, Request(CanvasView.RECOLORED), (60, 70, 0, 10)) is None  # outside the image
