@@ -1,4 +1,4 @@
-# Albedit: `make run` starts the app, `make test` runs the whole suite.
+# Albedit: `make run` starts the app, `make test` runs the whole suite, `make lint` ruff and mypy.
 # Both build .venv from scratch on first use.
 PYTHON ?= python3
 VENV := .venv
@@ -25,9 +25,15 @@ test: $(STAMP)
 	QT_QPA_PLATFORM=offscreen $(VENV)/bin/lint-imports
 	QT_QPA_PLATFORM=offscreen $(PY) -m pytest engine devices app tests
 
+# ruff (pyflakes, pycodestyle, isort, pyupgrade, bugbear) on the tree, mypy on engine/ and devices/;
+# both configured in pyproject.toml (.pre-commit-config.yaml runs the same two)
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+
 bench: $(STAMP)
 	$(PY) bench/solve.py
 	$(PY) bench/recolor.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

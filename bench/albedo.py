@@ -4,7 +4,8 @@ Cornell box (Fig. 6), right wall (0.1, 0.8, 0.1): the wall's colour as the photo
 it (its mean, interreflections included), its direct colour R^0 L_d, and R^0 L_d white-
 balanced by the direct image D — each compared with the albedo's chromaticity; then κ for
 "make it (0.2, 0.1, 0.8)" with the albedo measured against a card laid over the wall
-(expected: the paper's κ = (2, 0.125, 8)).
+(expected: the paper's κ = (2, 0.125, 8)); and the κ at which the wall's interreflection series
+diverges, estimated from the decomposition (engine.colour.kappa_limit) against the truth's.
 
 Checker scene, with the co-axial projector and with one beside the camera: the absolute
 albedo of the panel beside the chart (in its plane: the fit's use case), of the chart's own
@@ -28,7 +29,7 @@ from devices.virtual.scene import SCENE_DIR
 from engine.acquire import Recorder, measure_checker, prepare_target, projector_xy
 from engine.albedo import reference_scale
 from engine.checker import detect_checker, reference_reflectances
-from engine.colour import direct_colour, kappa_for_albedo
+from engine.colour import direct_colour, kappa_for_albedo, kappa_limit
 from engine.session import Session
 from engine.workflow import load_decomposition, run_calibration, run_capture
 
@@ -77,6 +78,12 @@ def cornell(work: Path, options: dict, frames: int) -> None:
         print(f"    direct colour R^0 L_d                  {_fmt(_chroma_error(direct_colour(d), truth))}")
         balanced = direct_colour(d, direct=prepared.direct)
         print(f"    R^0 L_d white-balanced by D            {_fmt(_chroma_error(balanced, truth))}")
+        terms = rig.truth.interactions(d.target, 16)[1:, d.target].astype(np.float64).sum(axis=1)
+        true_limit = terms[-2] / terms[-1]  # successive interactions' ratio: the series' growth
+        sums = d.components[:, d.target].astype(np.float64).sum(axis=1)
+        print(f"  κ limit (divergence), order 4: {np.round(kappa_limit(d), 2).tolist()}, true "
+              f"{np.round(true_limit, 2).tolist()}; the fit's last two components would say "
+              f"{np.round(sums[-2] / sums[-1], 2).tolist()}")
         albedo = scale.albedo(prepared.direct, prepared.mask)
         kappa = kappa_for_albedo(albedo, [0.2, 0.1, 0.8])
         print(f"  albedo against a card over the wall      {_fmt(100 * (albedo / truth - 1))}")

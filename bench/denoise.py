@@ -66,7 +66,8 @@ def main(argv=None) -> int:
     agree = float(np.abs(ours.components[1:] - ref[1:]).max() / np.abs(ref).max())
     print(f"denoise {h}x{w} RGB, K = {k}, target {100 * target.mean():.0f} % of the image")
     print(f"{'':>24} {'albedit':>9} {'per input':>10} {'ratio':>6}")
-    print(f"{'denoise_components, s':>24} {t_ours:>9.2f} {t_ref:>10.2f} {t_ref / t_ours:>5.1f}x   (largest difference {agree:.1e} of the peak)")
+    print(f"{'denoise_components, s':>24} {t_ours:>9.2f} {t_ref:>10.2f} {t_ref / t_ours:>5.1f}x   "
+          f"(largest difference {agree:.1e} of the peak)")
     return 0
 
 

@@ -86,7 +86,7 @@ def main() -> None:
     print()
     print(f"{'method':<44}{'time':>12}{'ratio':>10}")
     print(f"{'OpenCV getProjPixel, one call per pixel':<44}{t_cv * 1e3:>10.1f} ms{1.0:>9.1f}x")
-    print(f"{'decode_gray_code (numpy, best of %d)' % a.repeat:<44}{t_np * 1e3:>10.1f} ms{t_cv / t_np:>9.0f}x")
+    print(f"{f'decode_gray_code (numpy, best of {a.repeat})':<44}{t_np * 1e3:>10.1f} ms{t_cv / t_np:>9.0f}x")
     print(f"{'decode_gray_code + white/black shadow mask':<44}{t_shadow * 1e3:>10.1f} ms{t_cv / t_shadow:>9.0f}x")
     if not agree:
         raise SystemExit("decoders disagree")

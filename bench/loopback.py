@@ -74,7 +74,8 @@ def main() -> None:
                         work / "virtual", args.target, args.order),
     }
     scene = f"virtual:{args.scene}"
-    with devices.open_rig(scene, resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1, cache_dir=cache) as rig:
+    with devices.open_rig(scene, resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1,
+                          cache_dir=cache) as rig:
         mask = rig.targets[args.target]
         truth = rig.truth.recolor([(mask, kappa)])
         surfaces = ~rig.truth.emitters()

@@ -142,7 +142,8 @@ def measure_detail(doc, *, repeats: int = 10) -> list[tuple[str, np.ndarray]]:
         times = []
         for i in range(repeats + 1):
             t0 = time.perf_counter()
-            views.render_detail(renderer, Request(CanvasView.RECOLORED, (1.0, 1.0, 1.5 + 0.01 * i)), (y0, y0 + h, x0, x0 + w))
+            request = Request(CanvasView.RECOLORED, (1.0, 1.0, 1.5 + 0.01 * i))
+            views.render_detail(renderer, request, (y0, y0 + h, x0, x0 + w))
             if i:
                 times.append(time.perf_counter() - t0)
         rows.append((f"detail at {100 * zoom:.0f} % ({w}x{h})", np.array(times)))
@@ -166,7 +167,8 @@ def main(argv=None) -> int:
     app = QApplication.instance() or QApplication([])
     t = time.perf_counter()
     doc = make_document(a.height, a.width, a.order, np.random.default_rng(a.seed))
-    print(f"decomposition: K = {a.order}, {a.height}x{a.width} px ({doc.decomposition.components.nbytes / 2**20:.0f} MiB), "
+    print(f"decomposition: K = {a.order}, {a.height}x{a.width} px "
+          f"({doc.decomposition.components.nbytes / 2**20:.0f} MiB), "
           f"view {VIEW[1]}x{VIEW[0]}, {os.cpu_count()} cores (load average {os.getloadavg()[0]:.1f}: other work "
           f"on the machine shows up in the tails); built in {time.perf_counter() - t:.1f} s")
     rows = [
@@ -175,7 +177,8 @@ def main(argv=None) -> int:
         ("full-res recolor + to_display", measure_full_resolution(app, doc, events=max(10, a.events // 4))),
     ]
     ref = np.percentile(rows[0][1], 95)
-    print(f"\n{'slider event -> repainted frame':34s} {'n':>4s} {'p50 ms':>8s} {'p95 ms':>8s} {'max ms':>8s} {'p95 / app':>10s}")
+    print(f"\n{'slider event -> repainted frame':34s} {'n':>4s} {'p50 ms':>8s} {'p95 ms':>8s} {'max ms':>8s} "
+          f"{'p95 / app':>10s}")
     for name, s in rows:
         p50, p95 = np.percentile(s, 50) * 1e3, np.percentile(s, 95) * 1e3
         print(f"{name:34s} {len(s):4d} {p50:8.1f} {p95:8.1f} {s.max() * 1e3:8.1f} {np.percentile(s, 95) / ref:10.1f}x")

@@ -66,10 +66,12 @@ def main():
     factor = -(-h // pack.shape[0])
     pr_ours, _ = best_of(lambda: prepare_preview(d, (720, 1280)), 2)
     pr_ref, _ = best_of(lambda: padded_area_average(d.components, factor), 1)
-    print(f"{'pack preview, s':>22} {pr_ours:>9.3f} {pr_ref:>10.3f} {pr_ref / pr_ours:>5.1f}x   (numpy: padded reshape-sum)")
+    print(f"{'pack preview, s':>22} {pr_ours:>9.3f} {pr_ref:>10.3f} {pr_ref / pr_ours:>5.1f}x   "
+          "(numpy: padded reshape-sum)")
     p_ours, p95 = best_of(lambda: recolor_preview(pack, kappa), 50)
     p_ref, _ = best_of(lambda: naive(small, kappa), 20)
-    print(f"{'preview ' + 'x'.join(map(str, pack.shape)) + ', ms':>22} {p_ours * 1e3:>9.2f} {p_ref * 1e3:>10.2f} {p_ref / p_ours:>5.1f}x   (p95 {p95 * 1e3:.2f} ms)")
+    label = "preview " + "x".join(map(str, pack.shape)) + ", ms"
+    print(f"{label:>22} {p_ours * 1e3:>9.2f} {p_ref * 1e3:>10.2f} {p_ref / p_ours:>5.1f}x   (p95 {p95 * 1e3:.2f} ms)")
 
 
 if __name__ == "__main__":

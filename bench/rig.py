@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -102,19 +103,20 @@ def main() -> None:
         for size in args.sizes:
             res = (size, size)
             fresh = Path(tmp) / f"fresh{size}"
-            t_cold, _ = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=fresh))
-            t_cold1, _ = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=Path(tmp) / f"one{size}",
-                                                 supersample=1))
+            t_cold, _ = _timed(partial(open_rig, args.scene, resolution=res, cache_dir=fresh))
+            t_cold1, _ = _timed(partial(open_rig, args.scene, resolution=res, cache_dir=Path(tmp) / f"one{size}",
+                                        supersample=1))
             shared = Path(tmp) / "shared"
             open_rig(args.scene, resolution=(32, 32), cache_dir=shared)  # caches the form factors
-            t_ff, _ = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=shared))
-            t_cached, rig = _timed(lambda: open_rig(args.scene, resolution=res, cache_dir=shared), repeat=3)
+            t_ff, _ = _timed(partial(open_rig, args.scene, resolution=res, cache_dir=shared))
+            t_cached, rig = _timed(partial(open_rig, args.scene, resolution=res, cache_dir=shared), repeat=3)
             n_sub = 1000
             t_sub = per_pixel_form_factors(rig, n_sub, rng)
             n_live = int((rig.setup.quad[:rig.setup.n_pixels] >= 0).sum())
             t_pp = t_sub * n_live / n_sub
             rows.append((f"set-up {size}²: cold (nothing cached)", t_cold, None, None))
-            rows.append(("  alt: cold, one sample per pixel (supersample=1)", t_cold1, t_cold1 / t_cold, "alt / cold set-up"))
+            rows.append(("  alt: cold, one sample per pixel (supersample=1)", t_cold1, t_cold1 / t_cold,
+                         "alt / cold set-up"))
             rows.append((f"set-up {size}²: form factors cached", t_ff, None, None))
             rows.append((f"set-up {size}²: cached", t_cached, None, None))
             rows.append((f"  alt: per-pixel form factors (extrap. from {n_sub} px)", t_pp, t_pp / t_cold,
@@ -129,9 +131,10 @@ def main() -> None:
             ren = rig._renderer
             rig.projector.show(pattern)
             e = ren.direct_light(rig.projector.emitted, ambient=True)
-            t_solve = _median_time(lambda: ren.base.solve(e), args.repeat)
-            t_refactor = _median_time(lambda: Resolvent(rig.setup, ren.rho).solve(e), max(2, args.repeat // 2))
-            t_jacobi = _median_time(lambda: jacobi(rig, e), max(2, args.repeat // 2))
+            t_solve = _median_time(partial(ren.base.solve, e), args.repeat)
+            t_refactor = _median_time(lambda rig=rig, ren=ren, e=e: Resolvent(rig.setup, ren.rho).solve(e),
+                                      max(2, args.repeat // 2))
+            t_jacobi = _median_time(partial(jacobi, rig, e), max(2, args.repeat // 2))
             err = np.abs(jacobi(rig, e) - ren.base.solve(e)).max() / np.abs(ren.base.solve(e)).max()
             rows.append((f"  transport solve {size}² (pre-factored)", t_solve, None, None))
             rows.append(("  alt: re-factor per capture", t_refactor, t_refactor / t_solve, "alt / pre-factored"))

@@ -12,7 +12,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from engine.errors import DeviceError, InputError
+from engine.errors import DeviceError
 
 
 class DeviceTimeout(DeviceError):

@@ -2,7 +2,7 @@
 
 A camera backend never passes gamma-encoded values on (DESIGN.md, "Devices"). Webcams and
 8-bit files are linearised through a :class:`ResponseCurve` (supplied, or measured with OpenCV's
-Debevec calibration). RAW files are decoded by :func:`engine.imageio.decode_raw`, and clipped
+Debevec calibration). RAW files are decoded by :func:`engine.raw.decode_raw`, and clipped
 frames are completed from shorter exposures by the acquisition Recorder
 (``engine.acquire.recorder``), the one HDR merge.
 """
@@ -46,7 +46,8 @@ class ResponseCurve:
         if table.ndim == 1:
             table = np.repeat(table[:, None], 3, axis=1)
         if table.ndim != 2 or table.shape[1] != 3 or table.shape[0] < 2:
-            raise InputError(f"response lut must have shape (levels,) or (levels, 3) with levels >= 2, got {np.shape(lut)}")
+            raise InputError("response lut must have shape (levels,) or (levels, 3) with levels >= 2, "
+                             f"got {np.shape(lut)}")
         if not np.all(np.isfinite(table)) or np.any(table < 0):
             raise InputError("response lut must be finite and non-negative (linear radiance per code value)")
         if np.any(np.diff(table, axis=0) < 0):
@@ -179,9 +180,11 @@ def calibrate_response(images, exposures, *, samples: int = 70, smoothness: floa
     imgs = [np.ascontiguousarray(im) for im in images]
     times = np.asarray(exposures, dtype=np.float32)
     if len(imgs) < 2 or times.shape != (len(imgs),):
-        raise InputError(f"need at least 2 images and one exposure per image, got {len(imgs)} images and {times.shape} exposures")
+        raise InputError("need at least 2 images and one exposure per image, "
+                         f"got {len(imgs)} images and {times.shape} exposures")
     if any(im.dtype != np.uint8 or im.ndim != 3 or im.shape != imgs[0].shape or im.shape[2] != 3 for im in imgs):
-        raise InputError(f"images must all be uint8 (H, W, 3) of one shape, got {[(im.dtype.name, im.shape) for im in imgs]}")
+        raise InputError("images must all be uint8 (H, W, 3) of one shape, "
+                         f"got {[(im.dtype.name, im.shape) for im in imgs]}")
     if not np.all(np.isfinite(times)) or np.any(times <= 0):
         raise InputError(f"exposures must be positive seconds, got {times.tolist()}")
     cal = cv2.createCalibrateDebevec(samples=int(samples), lambda_=float(smoothness), random=False)

@@ -19,6 +19,9 @@ handle after ``exit()`` fails with libgphoto2's virtual USB camera and corrupts 
 
 Rig names: ``"gphoto2"`` (the first camera found), ``"gphoto2:usb:001,004"`` (a port) or
 ``"gphoto2:Nikon DSC D7100"`` (a model as listed by :func:`list_cameras`).
+
+Over 500 lines on purpose: every call into libgphoto2 (listing, opening, configuration widgets,
+capture, download, reconnect) stays in this one module, the only one that knows its API.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import math
 import threading
 import time
 from pathlib import PurePosixPath
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +39,7 @@ from devices.base import Frame
 from devices.registry import Availability
 from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
-from engine.imageio import RAW_EXTENSIONS, decode_raw
+from engine.raw import RAW_EXTENSIONS, decode_raw
 
 __all__ = ["GPhoto2Camera", "list_cameras", "open_camera", "parse_shutter", "probe"]
 
@@ -73,13 +77,20 @@ def _gphoto2():
     except ModuleNotFoundError as exc:
         if exc.name != "gphoto2":
             raise DeviceError(f"python-gphoto2 cannot be imported: {exc}") from None
-        raise DeviceError("python-gphoto2 is not installed; install the optional extra: pip install 'albedit[gphoto2]'") from None
+        raise DeviceError("python-gphoto2 is not installed; "
+                          "install the optional extra: pip install 'albedit[gphoto2]'") from None
     except ImportError as exc:  # installed, but libgphoto2 does not load
         raise DeviceError(f"python-gphoto2 cannot be imported: {exc}") from None
     return gphoto2
 
 
-def device_error(exc: BaseException, what: str) -> DeviceError:
+class GPhoto2DeviceError(DeviceError):
+    """A :class:`DeviceError` from libgphoto2 that keeps its error code (the reconnect rule reads it)."""
+
+    gphoto2_code: int | None = None
+
+
+def device_error(exc: BaseException, what: str) -> GPhoto2DeviceError:
     """Turn a ``gphoto2.GPhoto2Error`` into a DeviceError in plain words.
 
     Examples
@@ -90,8 +101,9 @@ def device_error(exc: BaseException, what: str) -> DeviceError:
     'opening the camera failed: the camera is claimed by another '
     """
     code = getattr(exc, "code", None)
-    words = ERROR_WORDS.get(code, f"libgphoto2 error {code}: {exc}")
-    err = DeviceError(f"{what} failed: {words}")
+    unknown = f"libgphoto2 error {code}: {exc}"
+    words = unknown if code is None else ERROR_WORDS.get(code, unknown)
+    err = GPhoto2DeviceError(f"{what} failed: {words}")
     err.gphoto2_code = code
     return err
 
@@ -209,7 +221,7 @@ class GPhoto2Camera:
         #: what a calibration depends on (engine.rig.RigLike.fingerprint): the body it was opened as
         self.fingerprint = {"camera": self.name or "the first camera found"}
         self._dog = Watchdog(f"camera {camera}" if camera else "camera")
-        self._cam = None
+        self._cam: Any = None  # a gphoto2.Camera once open (the library is untyped)
         self._cam = self._open(camera)
         self._session_open = True
         try:
@@ -228,7 +240,8 @@ class GPhoto2Camera:
                 current = self._config("exposure").get_value()
                 seconds = parse_shutter(current)
                 if seconds is None:
-                    raise DeviceError(f"the camera's shutter speed is {current!r}; pass exposure= (seconds) to set a fixed one")
+                    raise DeviceError(f"the camera's shutter speed is {current!r}; "
+                                      "pass exposure= (seconds) to set a fixed one")
                 self._exposure, self.settings["exposure"] = seconds, str(current)
             self._gain = self._read_gain(base_iso)
         except BaseException:
@@ -295,7 +308,9 @@ class GPhoto2Camera:
             alt = text.lower().removeprefix("f/")
             text = low.get(text.lower()) or low.get(alt) or low.get(f"f/{alt}") or ""
             if not text and key == "image_format" and str(value).upper() == "RAW":
-                raws = [c for c in choices if c.upper().startswith(("RAW", "NEF", "CR2", "CR3", "ARW", "RAF", "ORF", "RW2", "DNG")) and "+" not in c and "JPEG" not in c.upper()]
+                raw_names = ("RAW", "NEF", "CR2", "CR3", "ARW", "RAF", "ORF", "RW2", "DNG")
+                raws = [c for c in choices
+                        if c.upper().startswith(raw_names) and "+" not in c and "JPEG" not in c.upper()]
                 text = raws[0] if raws else ""
             if not text:
                 raise InputError(f"{key} {value!r} is not offered by this camera; valid choices: {', '.join(choices)}")
@@ -310,8 +325,8 @@ class GPhoto2Camera:
         self._set_choice(key, value, widget)
 
     def _shutter_choices(self) -> list[tuple[float, str]]:
-        pairs = [(parse_shutter(c), c) for c in self._choices(self._config("exposure"))]
-        pairs = sorted((s, c) for s, c in pairs if s is not None)
+        parsed = [(parse_shutter(c), c) for c in self._choices(self._config("exposure"))]
+        pairs = sorted((s, c) for s, c in parsed if s is not None)
         if not pairs:
             raise DeviceError("the camera offers no fixed shutter speeds (set the mode dial to M)")
         return pairs
@@ -327,7 +342,8 @@ class GPhoto2Camera:
         current = str(widget.get_value())
         self.settings["iso"] = current
         if not current.replace(".", "", 1).isdigit():
-            raise DeviceError(f"ISO is {current!r}; pass iso= with a fixed value (choices: {', '.join(self._choices(widget))})")
+            raise DeviceError(f"ISO is {current!r}; pass iso= with a fixed value "
+                              f"(choices: {', '.join(self._choices(widget))})")
         return float(current) / base
 
     # -- exposure and gain ----------------------------------------------------------------
@@ -395,7 +411,9 @@ class GPhoto2Camera:
         if not self._lock.acquire(blocking=False):
             return  # a capture is running; it schedules the next release itself
         try:
-            if not self.closed and self._session_open and time.monotonic() - self._last_use >= self.release_after * 0.99:
+            idle = time.monotonic() - self._last_use
+            after = self.release_after  # not None: the release timer runs only with one
+            if not self.closed and self._session_open and after is not None and idle >= after * 0.99:
                 self._drop_session()
         finally:
             self._lock.release()
@@ -417,7 +435,8 @@ class GPhoto2Camera:
         gp = self._gp
         try:
             self._ensure_session()
-            path = self._call(self._cam.capture, gp.GP_CAPTURE_IMAGE, what="capturing", timeout=self.timeout + self._exposure)
+            path = self._call(self._cam.capture, gp.GP_CAPTURE_IMAGE, what="capturing",
+                              timeout=self.timeout + self._exposure)
             folder, name = str(path.folder), str(path.name)
             try:
                 cfile = self._call(self._cam.file_get, folder, name, gp.GP_FILE_TYPE_NORMAL, what=f"downloading {name}")
@@ -433,7 +452,8 @@ class GPhoto2Camera:
                 self._drop_session()  # unplugged, timed out, claimed: start afresh next time
             raise
         if PurePosixPath(name).suffix.lower() not in RAW_EXTENSIONS:
-            raise DeviceError(f"the camera delivered {name!r}, not a RAW file; set image_format='RAW' (RAW only, not RAW+JPEG)")
+            raise DeviceError(f"the camera delivered {name!r}, not a RAW file; "
+                              "set image_format='RAW' (RAW only, not RAW+JPEG)")
         return name, data
 
     def _decode(self, name: str, data: bytes):
@@ -445,7 +465,8 @@ class GPhoto2Camera:
         if self.resolution is None:
             self.resolution = (h, w)
         elif (h, w) != tuple(self.resolution):
-            raise DeviceError(f"{name} is {w}x{h} pixels; the camera's images were {self.resolution[1]}x{self.resolution[0]}")
+            raise DeviceError(f"{name} is {w}x{h} pixels; "
+                              f"the camera's images were {self.resolution[1]}x{self.resolution[0]}")
         return raw
 
     def capture(self) -> Frame:
@@ -482,7 +503,8 @@ class GPhoto2Camera:
             "settings": dict(self.settings),
         }
         image = raw.image / np.float32(self._exposure * self._gain)
-        return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=raw.black_level, saturated=raw.saturated, metadata=meta)
+        return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=raw.black_level,
+                     saturated=raw.saturated, metadata=meta)
 
     def close(self) -> None:
         """Release the camera (``exit``). Idempotent; errors while releasing are ignored."""
@@ -515,5 +537,6 @@ def probe(*, gp=None) -> list[Availability]:
     except DeviceError as exc:
         return [Availability("gphoto2:", False, str(exc))]
     if not cameras:
-        return [Availability("gphoto2:", False, "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
+        return [Availability("gphoto2:", False,
+                             "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
     return [Availability(f"gphoto2:{port}", True, model) for model, port in cameras]

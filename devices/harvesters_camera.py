@@ -27,6 +27,7 @@ import re
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -46,7 +47,8 @@ PIXEL_FORMATS = tuple(
 )
 
 # GenICam names a Bayer pattern by its first row; OpenCV by the second row's last two pixels
-_BAYER_TO_CV = {"RG": "COLOR_BayerBG2RGB", "BG": "COLOR_BayerRG2RGB", "GR": "COLOR_BayerGB2RGB", "GB": "COLOR_BayerGR2RGB"}
+_BAYER_TO_CV = {"RG": "COLOR_BayerBG2RGB", "BG": "COLOR_BayerRG2RGB",
+                "GR": "COLOR_BayerGB2RGB", "GB": "COLOR_BayerGR2RGB"}
 
 
 #: harvesters' own log: it prints every failure with a traceback on stderr by default, and each
@@ -180,14 +182,15 @@ class HarvestersCamera:
         self.closed = False
         self._lock = threading.Lock()
         self._dog = Watchdog("GenICam camera")
-        self._ia = None
+        self._ia: Any = None  # harvesters' ImageAcquirer once the camera is open (the library is untyped)
         self._h = _new_harvester()
         try:
             self._call(self._h.add_file, str(cti_path), True, True, what="loading the GenTL producer")
             self._call(self._h.update, what="listing cameras")
             found = list(self._h.device_info_list)
             if not found:
-                raise DeviceError(f"no GenICam camera found through {cti_path.name} (connected, powered, on this network?)")
+                raise DeviceError(f"no GenICam camera found through {cti_path.name} "
+                                  "(connected, powered, on this network?)")
             key = {"serial_number": str(serial)} if serial else int(index)
             if isinstance(key, int) and not 0 <= key < len(found):
                 raise DeviceError(f"there is no camera {key}: {len(found)} found through {cti_path.name}")
@@ -201,7 +204,8 @@ class HarvestersCamera:
             #: what a calibration depends on (engine.rig.RigLike.fingerprint)
             self.fingerprint = self._identity()
             if self._node("ExposureTime") is None:
-                self.warnings.append("the camera has no ExposureTime feature: radiance is in relative units (exposure recorded as 1 s)")
+                self.warnings.append("the camera has no ExposureTime feature: "
+                                     "radiance is in relative units (exposure recorded as 1 s)")
             if exposure is not None:
                 self.exposure = exposure
             if gain is not None:
@@ -263,7 +267,8 @@ class HarvestersCamera:
         offered = [str(s) for s in getattr(node, "symbolics", [])]
         if wanted is not None:
             if wanted not in offered:
-                raise InputError(f"pixel_format {wanted!r} is not offered by this camera; valid choices: {', '.join(offered)}")
+                raise InputError(f"pixel_format {wanted!r} is not offered by this camera; "
+                                 f"valid choices: {', '.join(offered)}")
             choice = wanted
         else:
             usable = [f for f in PIXEL_FORMATS if f in offered]
@@ -370,7 +375,8 @@ class HarvestersCamera:
         scale = 1.0 / ((top - self.black_level) * exposure * gain)
         image = ((rgb - self.black_level) * scale).astype(np.float32)
         meta = {"backend": "harvesters", "pixel_format": fmt, "top_code": top, "warnings": list(self.warnings)}
-        return Frame(image=image, exposure=exposure, gain=gain, black_level=self.black_level, saturated=clipped, metadata=meta)
+        return Frame(image=image, exposure=exposure, gain=gain, black_level=self.black_level, saturated=clipped,
+                     metadata=meta)
 
     def close(self) -> None:
         """Destroy the image acquirer and reset the harvester. Idempotent; errors ignored."""
@@ -388,7 +394,8 @@ class HarvestersCamera:
                 pass
 
     def __repr__(self) -> str:
-        return f"HarvestersCamera(resolution={getattr(self, 'resolution', None)}, pixel_format={getattr(self, 'pixel_format', None)!r})"
+        return (f"HarvestersCamera(resolution={getattr(self, 'resolution', None)}, "
+                f"pixel_format={getattr(self, 'pixel_format', None)!r})")
 
 
 def open_camera(arg="", **options) -> HarvestersCamera:

@@ -57,10 +57,12 @@ def check_rig(name: str, **options) -> str:
         frame = cam.capture()
         image = np.asarray(frame.image)
         saturated = np.asarray(frame.saturated, bool)
-        lines.append(f"frame: {image.shape[1]}x{image.shape[0]}, projector black, exposure {frame.exposure:g} s, gain {frame.gain:g}")
+        lines.append(f"frame: {image.shape[1]}x{image.shape[0]}, projector black, "
+                     f"exposure {frame.exposure:g} s, gain {frame.gain:g}")
         finite = image[np.isfinite(image)]
         low, high = (float(finite.min()), float(finite.max())) if finite.size else (float("nan"), float("nan"))
-        lines.append(f"radiance: min {low:.4g}, median {float(np.median(finite)) if finite.size else float('nan'):.4g}, max {high:.4g}")
+        median = float(np.median(finite)) if finite.size else float("nan")
+        lines.append(f"radiance: min {low:.4g}, median {median:.4g}, max {high:.4g}")
         lines.append(f"saturated: {saturated.mean():.2%} of pixels")
         if image.shape[:2] != tuple(cam.resolution):
             lines.append(f"PROBLEM: the frame is {_size(image.shape[:2])} but the camera says {_size(cam.resolution)}")

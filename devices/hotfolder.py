@@ -4,7 +4,7 @@ Many camera makers ship tethering programs (Canon EOS Utility, Nikon Camera Cont
 Capture One, Sony Imaging Edge) that save each shot into a folder. This backend watches that
 folder: :meth:`HotFolderCamera.capture` optionally runs a trigger command, then waits for the
 next *new* file, waits until it is complete (same size on two polls and decodable), decodes it
-linearly (RAW through :func:`engine.imageio.decode_raw`; TIFF, EXR and PNG through
+linearly (RAW through :func:`engine.raw.decode_raw`; TIFF, EXR and PNG through
 :func:`engine.imageio.read_image`) and returns linear radiance.
 
 Rig name: ``"hotfolder:/path/to/folder"``, e.g.
@@ -27,7 +27,8 @@ from devices.base import Frame
 from devices.registry import Availability
 from engine.checks import check_positive
 from engine.errors import DeviceError, InputError
-from engine.imageio import RAW_EXTENSIONS, decode_raw, image_info, read_image
+from engine.imageio import image_info, read_image
+from engine.raw import RAW_EXTENSIONS, decode_raw
 
 __all__ = ["HotFolderCamera", "IMAGE_EXTENSIONS", "open_camera", "probe"]
 
@@ -120,7 +121,8 @@ class HotFolderCamera:
         self.quiet = check_positive("quiet", quiet)
         self.trigger_timeout = check_positive("trigger_timeout", trigger_timeout)
         if trigger is not None:
-            if isinstance(trigger, (str, bytes)) or not all(isinstance(a, (str, os.PathLike)) for a in trigger) or not trigger:
+            if (isinstance(trigger, (str, bytes)) or not all(isinstance(a, (str, os.PathLike)) for a in trigger)
+                    or not trigger):
                 raise InputError(
                     f"trigger must be a non-empty list of command arguments (run without a shell), got {trigger!r}; "
                     "e.g. ['gphoto2', '--trigger-capture']"
@@ -155,8 +157,9 @@ class HotFolderCamera:
         seconds = check_positive("exposure", seconds)
         if seconds != self._exposure:
             raise InputError(
-                f"a hot-folder camera's exposure is set on the camera or in its tethering software, not here "
-                f"(it is {self._exposure:g} s; asked for {seconds:g} s); open the rig with exposure= to record a new value"
+                "a hot-folder camera's exposure is set on the camera or in its tethering software, not here "
+                f"(it is {self._exposure:g} s; asked for {seconds:g} s); "
+                "open the rig with exposure= to record a new value"
             )
 
     # -- the folder ------------------------------------------------------------------------
@@ -183,16 +186,19 @@ class HotFolderCamera:
 
     def _run_trigger(self) -> None:
         try:
-            done = subprocess.run(self.trigger, capture_output=True, text=True, timeout=self.trigger_timeout, check=False)
+            done = subprocess.run(self.trigger, capture_output=True, text=True, timeout=self.trigger_timeout,
+                                  check=False)
         except FileNotFoundError:
             raise DeviceError(f"trigger command {self.trigger[0]!r} not found; install it or fix trigger=") from None
         except subprocess.TimeoutExpired:
-            raise DeviceError(f"trigger command {self.trigger} did not finish within {self.trigger_timeout:g} s") from None
+            raise DeviceError(f"trigger command {self.trigger} did not finish "
+                              f"within {self.trigger_timeout:g} s") from None
         except OSError as exc:
             raise DeviceError(f"trigger command {self.trigger} could not run: {exc}") from None
         if done.returncode != 0:
             tail = (done.stderr or done.stdout or "").strip().splitlines()[-3:]
-            raise DeviceError(f"trigger command {self.trigger} failed with exit code {done.returncode}: {' / '.join(tail) or 'no output'}")
+            raise DeviceError(f"trigger command {self.trigger} failed with exit code {done.returncode}: "
+                              f"{' / '.join(tail) or 'no output'}")
 
     def _decode(self, path: Path):
         """(image (H, W, 3) float32 relative radiance, saturated, black level) or raise."""
@@ -232,8 +238,8 @@ class HotFolderCamera:
                     error = exc
                     if now - changed_at >= self.quiet:  # unchanged for a while and still bad
                         raise DeviceError(
-                            f"hot-folder file {path.name!r} ({st.st_size} bytes, unchanged for {now - changed_at:.1f} s) "
-                            f"cannot be read: {exc}"
+                            f"hot-folder file {path.name!r} ({st.st_size} bytes, "
+                            f"unchanged for {now - changed_at:.1f} s) cannot be read: {exc}"
                         ) from None
             if now >= deadline:
                 if error is None or now - changed_at < self.quiet:
@@ -269,9 +275,10 @@ class HotFolderCamera:
                     self._seen.update(p.name for p in early)
                     names = ", ".join(repr(p.name) for p in early)
                     raise DeviceError(
-                        f"hot folder {str(self.folder)!r} received {names} before the camera was triggered: a frame taken "
-                        "for an earlier pattern (the camera fired twice, or on its own) or written by another program; "
-                        "it is left in the folder and not used: check the camera's drive mode, then run again"
+                        f"hot folder {str(self.folder)!r} received {names} before the camera was triggered: "
+                        "a frame taken for an earlier pattern (the camera fired twice, or on its own) "
+                        "or written by another program; it is left in the folder and not used: "
+                        "check the camera's drive mode, then run again"
                     )
                 self._run_trigger()
             while True:
@@ -297,7 +304,8 @@ class HotFolderCamera:
             self.last_path = path
             scale = np.float32(1.0 / (self._exposure * self.gain))
             meta = {"backend": "hotfolder", "file": path.name, "folder": str(self.folder), **extra}
-            return Frame(image=image * scale, exposure=self._exposure, gain=self.gain, black_level=black, saturated=saturated, metadata=meta)
+            return Frame(image=image * scale, exposure=self._exposure, gain=self.gain, black_level=black,
+                         saturated=saturated, metadata=meta)
 
     def close(self) -> None:
         """Stop using the folder (files are left where they are). Idempotent."""

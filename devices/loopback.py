@@ -36,6 +36,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -360,7 +361,7 @@ def open_rig(arg: str, **options) -> LoopbackRig:
     owned: list[Path] = []
     scene = camera = None
     try:
-        vopts = {k: options[k] for k in ("seed", "cache_dir", "patch_size") if k in options}
+        vopts: dict[str, Any] = {k: options[k] for k in ("seed", "cache_dir", "patch_size") if k in options}
         vopts["supersample"] = options.get("supersample", 1)
         resolution = options.get("resolution", (48, 64))
         scene = virtual.open_rig(arg, resolution=resolution, projector_resolution=projector.resolution, **vopts)

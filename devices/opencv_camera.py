@@ -134,7 +134,8 @@ class OpenCVCamera:
         self.source = target
         if isinstance(average, bool) or not isinstance(average, (int, np.integer)) or average < 1:
             raise InputError(f"average must be an integer >= 1, got {average!r}")
-        if discard is not None and (isinstance(discard, bool) or not isinstance(discard, (int, np.integer)) or discard < 0):
+        if discard is not None and (isinstance(discard, bool) or not isinstance(discard, (int, np.integer))
+                                    or discard < 0):
             raise InputError(f"discard must be an integer >= 0, got {discard!r}")
         self.average = int(average)
         self.discard = (4 if self.is_device else 0) if discard is None else int(discard)
@@ -171,6 +172,7 @@ class OpenCVCamera:
         self.resolution: tuple[int, int] = first.shape[:2]
         self.dtype = first.dtype
         levels = int(np.iinfo(first.dtype).max) + 1
+        self._response_note: str | None  # what the metadata calls the response when it was assumed
         if response is None:
             response = "srgb" if first.dtype == np.uint8 else "linear"
             self.warnings.append(f"response not given: assuming {response}; measure it with calibrate_response()")
@@ -188,7 +190,8 @@ class OpenCVCamera:
     def _switch_off_automatics(self, exposure: float | None) -> None:
         manual = _MANUAL_EXPOSURE.get(self.backend, 1.0)
         if not self._set(cv2.CAP_PROP_AUTO_EXPOSURE, manual, "auto_exposure"):
-            self.warnings.append(f"the {self.backend} driver refused to switch auto exposure off: frames may vary in brightness")
+            self.warnings.append(f"the {self.backend} driver refused to switch auto exposure off: "
+                                 "frames may vary in brightness")
         if not self._set(cv2.CAP_PROP_AUTO_WB, 0, "auto_wb"):
             self.warnings.append(f"the {self.backend} driver refused to switch auto white balance off")
         if exposure is not None:
@@ -222,7 +225,8 @@ class OpenCVCamera:
         if value is None:
             raise DeviceError(f"OpenCV's {self.backend} backend has no known exposure unit; cannot set exposure")
         if not self._set(cv2.CAP_PROP_EXPOSURE, value, "exposure"):
-            raise DeviceError(f"the {self.backend} driver refused exposure {seconds:g} s (value {value:g}); is auto exposure still on?")
+            raise DeviceError(f"the {self.backend} driver refused exposure {seconds:g} s (value {value:g}); "
+                              "is auto exposure still on?")
         self._exposure, self._exposure_known = seconds, True
         self._stale = True
 
@@ -244,7 +248,8 @@ class OpenCVCamera:
         ok, frame = self._dog.call(self._cap.read, timeout=self.timeout, what="reading a frame")
         if not ok or frame is None:
             if self.is_device:
-                raise DeviceError(f"camera {self.source} stopped delivering frames (unplugged, or in use by another program?)")
+                raise DeviceError(f"camera {self.source} stopped delivering frames "
+                                  "(unplugged, or in use by another program?)")
             raise DeviceError(f"no more frames in {self.source!r}")
         if frame.dtype not in (np.uint8, np.uint16):
             raise DeviceError(f"{self.source!r} delivered {frame.dtype} frames; expected 8- or 16-bit")
@@ -257,7 +262,8 @@ class OpenCVCamera:
         rgb = np.ascontiguousarray(frame[:, :, ::-1])  # OpenCV delivers BGR
         size = getattr(self, "resolution", None)
         if size is not None and rgb.shape[:2] != tuple(size):
-            raise DeviceError(f"{self.source!r} delivered a {rgb.shape[1]}x{rgb.shape[0]} frame; the camera is {size[1]}x{size[0]}")
+            raise DeviceError(f"{self.source!r} delivered a {rgb.shape[1]}x{rgb.shape[0]} frame; "
+                              f"the camera is {size[1]}x{size[0]}")
         return rgb
 
     def capture_codes(self) -> np.ndarray:
@@ -316,7 +322,8 @@ class OpenCVCamera:
                 "controls": dict(self.controls),
                 "warnings": list(self.warnings),
             }
-            return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=0.0, saturated=saturated, metadata=meta)
+            return Frame(image=image, exposure=self._exposure, gain=self._gain, black_level=0.0, saturated=saturated,
+                         metadata=meta)
 
     def calibrate_response(self, exposures, *, samples: int = 70, smoothness: float = 10.0) -> ResponseCurve:
         """Measure this camera's response from a bracket of exposures of a static scene.
@@ -336,7 +343,8 @@ class OpenCVCamera:
             The source is a file or the driver refuses exposure changes.
         """
         if not self.is_device:
-            raise DeviceError("a file's exposure cannot be changed; calibrate a response from a bracketed set with devices._linearize.calibrate_response")
+            raise DeviceError("a file's exposure cannot be changed; calibrate a response from a bracketed set "
+                              "with devices._linearize.calibrate_response")
         if self.dtype != np.uint8:
             raise DeviceError("Debevec calibration needs 8-bit frames; this camera delivers 16-bit")
         before = self._exposure

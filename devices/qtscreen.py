@@ -14,6 +14,9 @@ A projector on the second screen, driven from an acquisition worker::
     projector = open_projector("HDMI-1", settle=0.15)   # on the UI thread
     projector.identify()                   # name, resolution and a grid, to check the wiring
     projector.show(pattern)                # from any thread; returns once the frame is up
+
+Over 500 lines on purpose: the projector window, the screen list (with EDID identity) and the
+cross-thread hand-off of patterns are one Qt object's life cycle.
 """
 
 from __future__ import annotations
@@ -47,7 +50,9 @@ __all__ = [
 class ScreenInfo(NamedTuple):
     """One screen as Qt sees it; ``width``/``height`` in device pixels (what a projector shows)."""
 
-    index: int
+    # mypy reads a field named "index" as an incompatible override of the tuple method index();
+    # that method is not used on a ScreenInfo, and the field name is public API
+    index: int  # type: ignore[assignment]
     name: str
     width: int
     height: int
@@ -329,7 +334,8 @@ class QtScreenProjector:
 
     bit_depth = 8
 
-    def __init__(self, screen: int | str = 1, *, settle: float = 0.1, timeout: float = 5.0, sleep: Callable[[float], None] | None = None):
+    def __init__(self, screen: int | str = 1, *, settle: float = 0.1, timeout: float = 5.0,
+                 sleep: Callable[[float], None] | None = None):
         app = _application()
         if not _on_ui_thread():
             raise DeviceError("open the projector on the Qt UI thread (the thread that created the QApplication)")
@@ -568,7 +574,7 @@ class QtScreenProjector:
         self.closed = True
         self.window.closing = True
         app = QCoreApplication.instance()
-        if app is not None:
+        if isinstance(app, QGuiApplication):  # the projector was opened with one (_application)
             try:
                 app.screenRemoved.disconnect(self._on_screen_removed)
             except (RuntimeError, TypeError):
@@ -583,7 +589,8 @@ class QtScreenProjector:
         return f"QtScreenProjector({self.screen_name!r}, resolution={self.resolution}, settle={self.settle:g})"
 
 
-def open_projector(screen: int | str | None = None, *, settle: float = 0.1, timeout: float = 5.0, sleep=None) -> QtScreenProjector:
+def open_projector(screen: int | str | None = None, *, settle: float = 0.1, timeout: float = 5.0,
+                   sleep=None) -> QtScreenProjector:
     """Open a full-screen projector window (on the Qt UI thread).
 
     Parameters
@@ -632,4 +639,5 @@ def probe() -> list[Availability]:
         return [Availability("qtscreen:", False, str(exc))]
     if not screens:
         return [Availability("qtscreen:", False, "no screen found")]
-    return [Availability(f"qtscreen:{s.index}", True, f"{s.name or 'unnamed screen'} {s.width}x{s.height}") for s in screens]
+    return [Availability(f"qtscreen:{s.index}", True, f"{s.name or 'unnamed screen'} {s.width}x{s.height}")
+            for s in screens]

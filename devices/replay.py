@@ -44,7 +44,8 @@ class ReplayProjector:
     """
 
     def __init__(self, resolution: tuple[int, int], bit_depth: int = 8):
-        self.resolution = tuple(resolution)
+        h, w = resolution
+        self.resolution = (h, w)
         self.bit_depth = int(bit_depth)
         self.pattern_id: str | None = None
 
@@ -138,7 +139,8 @@ class ReplayCamera:
         """
         pattern_id = self._projector.pattern_id
         if pattern_id is None:
-            raise DeviceError("replay camera: nothing has been shown on the projector yet, so there is nothing to replay")
+            raise DeviceError("replay camera: nothing has been shown on the projector yet, "
+                              "so there is nothing to replay")
         records = self._candidates(pattern_id)
         slot = (pattern_id, self._exposure if self._exposure_set else None)
         n = self._served.get(slot, 0)

@@ -249,7 +249,7 @@ def detect_checker(image) -> Checker:
     h, w = img.shape[:2]
     ccd = _detector()
     work_w = int(ccd.SETTINGS_SEGMENTATION_COLORCHECKER_CLASSIC["working_width"])
-    small = img.astype(np.float32, copy=False)
+    small: np.ndarray = img.astype(np.float32, copy=False)
     if w > work_w:  # area-average a large photograph down to the detector's working width first
         small = cv2.resize(small, (work_w, int(h * work_w / w)), interpolation=cv2.INTER_AREA)
     level = float(np.percentile(small, 90))

@@ -6,6 +6,8 @@ shows what was given and says what was expected. Nothing is clipped or converted
 
 from __future__ import annotations
 
+from typing import Literal, overload
+
 import numpy as np
 
 from engine.errors import InputError
@@ -213,6 +215,14 @@ def check_fraction(name: str, value, *, channels: int = 3, upper_open: bool = Tr
         bound = "[0, 1)" if upper_open else "[0, 1]"
         raise InputError(f"{name} must be in {bound}, got {b.tolist()}")
     return b
+
+
+@overload
+def check_positive(name: str, value, *, allow_none: Literal[False] = False) -> float: ...
+
+
+@overload
+def check_positive(name: str, value, *, allow_none: bool) -> float | None: ...
 
 
 def check_positive(name: str, value, *, allow_none: bool = False) -> float | None:

@@ -24,6 +24,7 @@ import numpy as np
 from engine.checks import check_float_image, check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
+from engine.figurate import transport_matrix
 
 __all__ = [
     "Convergence",
@@ -410,22 +411,65 @@ def kappa_limit(decomposition: Decomposition) -> np.ndarray:
     Returns
     -------
     (3,) float64
-        ``Σ R^{K-2} L_d / Σ R^{K-1} L_d`` over the target: the reciprocal of the growth
-        rate of the last interactions, an estimate of 1 / (spectral radius of R). ``inf``
-        where the last component is 0 or K = 1 (nothing measured to bound it).
+        ``1 / λ``, with λ the estimated growth rate of the target's interactions (the spectral
+        radius of its round trip through the scene); ``inf`` where nothing was measured to
+        bound it (K = 1, or no interaction light).
 
     Notes
     -----
-    ``Σ κ^{i+1} R^i L_d`` (Eq. 3) is a power series in κR; it converges while κ times the
-    spectral radius of R is below 1, and the ratio of successive ``R^i L_d`` tends to that
-    radius. With the absolute albedo known, ``1 / albedo`` is a stricter bound.
+    ``Σ κ^{i+1} R^i L_d`` (Eq. 3) is a power series in κR; it converges while κλ < 1. The
+    measured components cannot tell λ directly: a decomposition of order K is a truncated fit,
+    whose last component absorbs every interaction beyond it (on the ideal Cornell wall the
+    ratio of its last two components puts the green limit at 1.5 at order 4, against 5.4).
+    The observations carry the whole series instead: summed over the target,
+    ``obs[r] = Σ_n binom(n + r, r) S_n`` (Eq. 6), and for interactions falling as modes
+    ``S_n = Σ_j a_j λ_j^n`` that is ``Σ_j a_j μ_j^{r+1}`` with ``μ_j = 1 / (1 − λ_j)``. So the
+    observation sums (rebuilt from the components through Eq. 6) are fitted with two modes
+    (Prony's method on the last four, K ≥ 4), the slowest giving λ; with fewer observations,
+    or when the fit has no real mode above the last observations' growth (noise), that growth
+    itself gives λ — an underestimate, as the ratios of successive observations rise towards
+    ``μ_max``. On the ideal virtual rig at order ≥ 4 the Cornell wall's limits come out 1–2 %
+    above the truth (`bench/albedo.py`, 96²); on the realistic rig (16 frames) its green is
+    6.7 for 5.4, but channels that interreflect little (limits of 37–49) come out near 5:
+    their observations grow faster than the ideal rig's (errors of the re-emitted light, not
+    isolated). Physics stops earlier anyway: a surface's albedo stays below 1, so
+    ``1 / albedo`` (:func:`kappa_ceiling`, with a reference) is the tighter bound.
+
+    Examples
+    --------
+    >>> comps = np.zeros((2, 1, 1, 3)); comps[0] = 0.9375; comps[1] = 0.3125   # order 2
+    >>> d = Decomposition(comps, np.zeros((1, 1, 3)), np.ones((1, 1), bool))   # obs = 1.25, 1.5625 = 1.25²
+    >>> kappa_limit(d).round(3).tolist()
+    [5.0, 5.0, 5.0]
     """
-    comps = _inside_sums(decomposition)
-    if comps.shape[0] < 2:
-        return np.full(comps.shape[1], np.inf)
-    last, before = comps[-1], comps[-2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(last > 0, before / np.where(last > 0, last, 1.0), np.inf)
+    sums = _inside_sums(decomposition)
+    k = sums.shape[0]
+    if k < 2:
+        return np.full(sums.shape[1], np.inf)
+    obs = transport_matrix(k) @ sums
+    growth = np.array([_growth(obs[:, c]) for c in range(obs.shape[1])])
+    with np.errstate(divide="ignore"):
+        return np.where(growth > 0, 1.0 / np.where(growth > 0, growth, 1.0), np.inf)
+
+
+def _growth(obs: np.ndarray) -> float:
+    """λ of the slowest mode of observation sums ``obs[r] = Σ_j a_j μ_j^{r+1}`` (see :func:`kappa_limit`)."""
+    if not np.all(np.isfinite(obs)) or obs[-2] <= 0 or obs[-1] <= obs[-2]:
+        return 0.0
+    floor = 1.0 - obs[-2] / obs[-1]
+    if len(obs) < 4:
+        return floor
+    o = obs[-4:]
+    system = np.array([[o[1], o[0]], [o[2], o[1]]])
+    if abs(np.linalg.det(system)) <= 1e-9 * o[2] ** 2:  # one mode only: the ratio is exact
+        return floor
+    p, q = np.linalg.solve(system, o[2:])
+    disc = p * p + 4 * q
+    if disc < 0:
+        return floor
+    mu = (p + np.sqrt(disc)) / 2
+    lam = 1.0 - 1.0 / mu if mu > 1 else 0.0
+    return float(lam) if floor <= lam < 1 else floor
 
 
 def kappa_ceiling(decomposition: Decomposition, albedo=None) -> np.ndarray:
@@ -451,7 +495,7 @@ def kappa_ceiling(decomposition: Decomposition, albedo=None) -> np.ndarray:
     >>> comps[0, 0, 0] = 1.0; comps[1, 0, 0] = 0.1
     >>> d = Decomposition(comps, np.zeros((1, 2, 3), np.float32), np.array([[True, False]]))
     >>> kappa_ceiling(d).round(3).tolist(), kappa_ceiling(d, [0.5, 0.05, 0.2]).round(3).tolist()
-    ([10.0, 10.0, 10.0], [2.0, 10.0, 5.0])
+    ([12.0, 12.0, 12.0], [2.0, 12.0, 5.0])
     """
     limit = kappa_limit(decomposition)
     if albedo is None:

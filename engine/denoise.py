@@ -81,8 +81,9 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     first_outside = 0 if decomposition.unreached_light else 1
     # which components are filtered in which region: inside the interactions 1..K-1, outside
     # every outside component but the one that absorbs the change
-    jobs = [(region, [i for i in range(k) if (i >= 1 if inside_region else first_outside <= i < decomposition.outside_order)])
-            for inside_region, region in ((True, target), (False, ~target))]
+    inside_ids = [i for i in range(k) if i >= 1]
+    outside_ids = [i for i in range(k) if first_outside <= i < decomposition.outside_order]
+    jobs = [(target, inside_ids), (~target, outside_ids)]
     smoothed = comps.copy()
     tasks = [(region, ids, ch) for region, ids in jobs if ids and region.any() for ch in range(c)]
 

@@ -23,7 +23,8 @@ def pytest_addoption(parser):
         action="store",
         default=None,
         metavar="NAME",
-        help="rig name for hardware tests (e.g. gphoto2, opencv:0, hotfolder:/path); without it *_with_device tests are skipped",
+        help="rig name for hardware tests (e.g. gphoto2, opencv:0, hotfolder:/path); "
+             "without it *_with_device tests are skipped",
     )
     parser.addoption(
         "--without-vendor-libraries",
@@ -51,5 +52,6 @@ def pytest_collection_modifyitems(config, items):
     skip = pytest.mark.skip(reason="hardware test: give --device NAME to run it")
     for item in items:
         name = getattr(item, "originalname", item.name)
-        if name.endswith("_with_device") or item.path.stem.endswith("_with_device") or item.get_closest_marker("device"):
+        if (name.endswith("_with_device") or item.path.stem.endswith("_with_device")
+                or item.get_closest_marker("device")):
             item.add_marker(skip)

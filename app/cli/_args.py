@@ -80,7 +80,8 @@ def resolution(text: str) -> tuple[int, int]:
 
 def add_rig_options(parser) -> None:
     """``--rig NAME`` and the virtual rig's options."""
-    parser.add_argument("--rig", default="virtual:cornell", help="rig to open (see `albedit devices`); default %(default)s")
+    parser.add_argument("--rig", default="virtual:cornell",
+                        help="rig to open (see `albedit devices`); default %(default)s")
     parser.add_argument("--ideal", action="store_true", help="virtual rig: no noise, linear projector")
     parser.add_argument("--resolution", type=resolution, default=None, help="virtual rig camera resolution, N or HxW")
     parser.add_argument("--projector", choices=("coaxial", "offset"), default=None, help="virtual rig projector pose")

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from engine.errors import InputError
 
-NAMES = ("solve", "recolor", "rig", "preview", "paper", "graycode", "denoise", "albedo", "loopback", "session", "optics")
+NAMES = ("solve", "recolor", "rig", "preview", "paper", "graycode", "denoise", "albedo", "loopback", "session",
+         "optics")
 
 
 def add_arguments(parser) -> None:

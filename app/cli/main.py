@@ -1,6 +1,6 @@
 """The headless ``albedit`` subcommands for lab techs and batch work.
 
-``albedit demo``, ``calibrate``, ``capture``, ``recolor``, ``export``, ``devices`` and ``bench``
+``albedit demo``, ``calibrate``, ``capture``, ``checker``, ``recolor``, ``export``, ``devices`` and ``bench``
 report progress on stderr, print one-line errors and exit non-zero on failure.
 """
 
@@ -18,7 +18,8 @@ COMMANDS = {
     "demo": ("app.cli.demo", "run the whole pipeline on the virtual Cornell box and score it against ground truth"),
     "calibrate": ("app.cli.calibrate", "calibrate a rig (black frame, projector response, Gray-code correspondences)"),
     "capture": ("app.cli.capture", "capture the observations of one target (or a cascade) into a session"),
-    "recolor": ("app.cli.recolor", "recolor a captured session's target and write the image"),
+    "checker": ("app.cli.checker", "measure a colour checker in a session's scene (absolute albedo)"),
+    "recolor": ("app.cli.recolor", "recolor a captured session's target (kappa, colour, albedo or match), write it"),
     "export": ("app.cli.export", "export a session's saved edit (targets and kappa) as EXR, TIFF or PNG"),
     "devices": ("app.cli.devices", "list the rigs this machine can open and take one frame from one"),
     "bench": ("app.cli.bench", "run the engine benchmarks"),

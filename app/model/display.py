@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
+from itertools import pairwise
 
 import numba
 import numpy as np
@@ -160,7 +161,7 @@ def recolor_rgb32(decomposition, kappa, *, exposure: float = 0.0) -> np.ndarray:
     if _POOL is None:
         _POOL = ThreadPoolExecutor(_THREADS, thread_name_prefix="albedit-display")
     jobs = [_POOL.submit(_recolor_rows, comps, unreached, weights, scale, _LUT, out, int(a), int(b))
-            for a, b in zip(bands[:-1], bands[1:])]
+            for a, b in pairwise(bands)]
     for j in jobs:
         j.result()
     return out

@@ -154,7 +154,7 @@ def polygon_mask(points, shape: tuple[int, int]):
         # pixel j is inside a span [xl, xr) when its centre j + 0.5 is
         starts = np.clip(np.ceil(xs[0::2] - 0.5).astype(np.int64) - x0, 0, x1 - x0)
         stops = np.clip(np.ceil(xs[1::2] - 0.5).astype(np.int64) - x0, 0, x1 - x0)
-        for a, b in zip(starts, stops):
+        for a, b in zip(starts, stops, strict=True):  # a closed polygon crosses a row an even number of times
             stamp[i, a:b] = True
     return (y0, y1, x0, x1), stamp
 

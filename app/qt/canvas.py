@@ -47,11 +47,15 @@ class Canvas(QWidget):
     viewport_changed(tuple, float)
         The camera pixels ``(y0, y1, x0, x1)`` on screen and the zoom, after every zoom, pan
         or resize.
+    picked(float, float)
+        While :attr:`picking` (the eyedropper): the camera pixel ``(x, y)`` clicked; a click
+        picks instead of painting.
     """
 
     cursor_moved = Signal(object)
     zoom_changed = Signal(float)
     viewport_changed = Signal(tuple, float)
+    picked = Signal(float, float)
 
     MIN_ZOOM, MAX_ZOOM = 1.0 / 64.0, 64.0
 
@@ -81,6 +85,7 @@ class Canvas(QWidget):
         self._space = False
         self._dragging_split = False
         self._painting = False
+        self.picking = False
         self.paint_count = 0  # frames painted (benchmarks wait on it)
         self.painted_request = 0
         ev = document.events
@@ -311,11 +316,19 @@ class Canvas(QWidget):
             p.setBrush(QColor(255, 255, 255))
             for pt in poly:
                 p.drawEllipse(pt, 2.5, 2.5)
+        if self._mouse is not None and self.picking:  # the eyedropper's averaged square (5×5 camera pixels)
+            r = 2.5 * self.zoom
+            p.setBrush(Qt.BrushStyle.NoBrush)
+            for colour, width in ((QColor(0, 0, 0, 180), 3), (QColor(255, 255, 255), 1)):
+                p.setPen(QPen(colour, width))
+                p.drawRect(QRectF(self._mouse.x() - r, self._mouse.y() - r, 2 * r, 2 * r))
+            return
         if self._mouse is not None and self.painter.tool in (Tool.BRUSH, Tool.ERASER) and self._pan_from is None:
             r = self.painter.size * self.zoom / 2
             p.setBrush(Qt.BrushStyle.NoBrush)
             for colour, width in ((QColor(0, 0, 0, 180), 3), (QColor(255, 255, 255), 1)):
-                p.setPen(QPen(colour, width, Qt.PenStyle.DashLine if self.painter.tool == Tool.ERASER else Qt.PenStyle.SolidLine))
+                style = Qt.PenStyle.DashLine if self.painter.tool == Tool.ERASER else Qt.PenStyle.SolidLine
+                p.setPen(QPen(colour, width, style))
                 p.drawEllipse(self._mouse, r, r)
 
     def _draw_banner(self, p: QPainter, text: str) -> None:
@@ -367,6 +380,11 @@ class Canvas(QWidget):
         subtract = bool(e.modifiers() & Qt.KeyboardModifier.AltModifier) or "right" in buttons
         return MouseEvent(kind, img.x(), img.y(), frozenset(buttons), subtract)
 
+    def set_picking(self, on: bool) -> None:
+        """The eyedropper: the next left clicks emit :attr:`picked` instead of painting."""
+        self.picking = bool(on)
+        self.update()
+
     def _near_divider(self, pos: QPointF) -> bool:
         if self.frame is None or self.frame.second is None:
             return False
@@ -381,6 +399,10 @@ class Canvas(QWidget):
             return
         if e.button() == Qt.MouseButton.LeftButton and self._near_divider(e.position()):
             self._dragging_split = True
+            return
+        if self.picking and e.button() == Qt.MouseButton.LeftButton and self._paints_camera_pixels():
+            img = self.to_image(e.position())
+            self.picked.emit(img.x(), img.y())
             return
         if e.button() in (Qt.MouseButton.LeftButton, Qt.MouseButton.RightButton) and self._paints_camera_pixels():
             self._painting = self.painter.handle(self._plain(EventType.PRESS, e))

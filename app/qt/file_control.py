@@ -14,8 +14,8 @@ from PySide6.QtWidgets import QFileDialog, QMessageBox
 
 from app import APP_NAME
 from app.model import files, saving
-from engine.imageio import RAW_EXTENSIONS
 from engine.progress import checkpoint
+from engine.raw import RAW_EXTENSIONS
 
 MAX_RECENT = 8
 EXPORT_FILTERS = {

@@ -33,13 +33,14 @@ from app.model.views import CanvasView
 from app.qt import actions
 from app.qt.actions import KeepAppShortcuts
 from app.qt.canvas import Canvas
+from app.qt.colour_panel import ColourPanel, ReferenceView
 from app.qt.file_control import FileControl
 from app.qt.layout import fit_to_screen, scrolling
 from app.qt.panels import AlbedoPanel, NoiseReductionPanel, TargetPanel
 from app.qt.preview import PreviewController
 from app.qt.rig_control import RigControl
 from app.qt.undo import QtHistory
-from app.qt.worker import Job, JobProgress
+from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
 from engine.errors import InputError
 
 APP_NAME = app.APP_NAME
@@ -83,6 +84,8 @@ class MainWindow(QMainWindow):
         self.painter: Painter | None = None
         self.target_panel: TargetPanel | None = None
         self.albedo_panel: AlbedoPanel | None = None
+        self.colour_panel: ColourPanel | None = None
+        self._ui = UiCaller(self)
         self.noise_panel: NoiseReductionPanel | None = None
         self._placeholder = QLabel(self.PLACEHOLDER, objectName="placeholder")
         self._placeholder.setAlignment(Qt.AlignmentFlag.AlignCenter)
@@ -114,6 +117,13 @@ class MainWindow(QMainWindow):
             d.setFeatures(QDockWidget.DockWidgetFeature.DockWidgetMovable
                           | QDockWidget.DockWidgetFeature.DockWidgetFloatable)
             self.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, d)
+        self.reference_dock = QDockWidget("Reference picture", self, objectName="reference")
+        self.reference_view = ReferenceView()
+        self.reference_view.picked.connect(
+            lambda x, y: self.colour_panel and self.colour_panel.pick_reference(self.reference_view.pixels, x, y))
+        self.reference_dock.setWidget(self.reference_view)
+        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.reference_dock)
+        self.reference_dock.hide()  # until a reference picture is opened
 
     def _build_status(self) -> None:
         sb = self.statusBar()
@@ -173,11 +183,19 @@ class MainWindow(QMainWindow):
         self.zoom_label.setText(f"{100 * self.canvas.zoom:.0f} %")  # the fit already happened
         self.target_panel = TargetPanel(document)
         self.target_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
-        self.albedo_panel = AlbedoPanel(document)
+        self.colour_panel = ColourPanel(document, lambda: self.session, self.exposure_spin.value)
+        self.colour_panel.picking.connect(self.canvas.set_picking)
+        self.canvas.picked.connect(self.colour_panel.pick_photograph)
+        self.colour_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
+        self.colour_panel.checker_requested.connect(self.measure_checker)
+        self.colour_panel.reference_requested.connect(self.open_reference)
+        self.exposure_spin.valueChanged.connect(self.colour_panel.refresh)
+        self.albedo_panel = AlbedoPanel(document, colour=self.colour_panel)
         self.noise_panel = NoiseReductionPanel(document)
         self.noise_panel.apply_requested.connect(self.apply_noise_reduction)
         self.targets_dock.setWidget(scrolling(self.target_panel, "targets_scroll"))
-        self.albedo_dock.setWidget(scrolling(self._stacked(self.albedo_panel, self.noise_panel), "albedo_scroll"))
+        self.albedo_dock.setWidget(scrolling(self._stacked(self.albedo_panel, self.colour_panel, self.noise_panel),
+                                             "albedo_scroll"))
         ev = document.events
         ev.dirty.connect(lambda _d: self._update_title())
         ev.warning.connect(lambda m: self.statusBar().showMessage(m, 8000))
@@ -196,10 +214,12 @@ class MainWindow(QMainWindow):
         if self.preview is not None:
             self.preview.close()
             self.preview.deleteLater()
+        if self.colour_panel is not None:
+            self.exposure_spin.valueChanged.disconnect(self.colour_panel.refresh)
         for stack in self.undo_group.stacks():
             self.undo_group.removeStack(stack)
             stack.deleteLater()
-        self.preview = self.canvas = self.painter = None
+        self.preview = self.canvas = self.painter = self.colour_panel = None
 
     @staticmethod
     def _stacked(*widgets: QWidget) -> QWidget:
@@ -261,6 +281,9 @@ class MainWindow(QMainWindow):
             a.setEnabled(self.condition("document"))
         for view, a in self.view_actions.items():
             a.setEnabled(self.doc is not None and self.preview is not None and self.preview.available(view))
+        if self.colour_panel is not None:
+            self.colour_panel.can_measure = self.condition("rig") and self.session is not None
+            self.colour_panel.refresh()
         if self.doc is not None and self.preview is not None and not self.preview.available(self.preview.view):
             self.set_view(CanvasView.RECOLORED)
 
@@ -436,11 +459,38 @@ class MainWindow(QMainWindow):
 
     def _set_busy(self, busy: bool) -> None:
         """While a job runs the document is read by it: no edits, no undo."""
-        for w in (self.canvas, self.target_panel, self.albedo_panel, self.noise_panel):
+        for w in (self.canvas, self.target_panel, self.albedo_panel, self.colour_panel, self.noise_panel):
             if w is not None:
                 w.setEnabled(not busy)
         stacks = self.undo_group.stacks()
         self.undo_group.setActiveStack(None if busy or not stacks else stacks[-1])
+
+    # ================================================================== colour
+    def measure_checker(self) -> None:
+        """The Albedo dock's Checker button: find a ColorChecker in the scene and measure it on the open rig
+        (a job); the session's targets get absolute albedo."""
+        from engine.workflow import run_checker
+
+        rig, session, doc = self.rigs.rig, self.session, self.doc
+        if rig is None or session is None or doc is None:
+            self.statusBar().showMessage("Measuring a colour checker needs an open rig and a session", 8000)
+            return
+
+        def done(record):
+            self.statusBar().showMessage(f"{record.report()}: albedo is absolute now", 12000)
+            if doc is self.doc and self.colour_panel is not None:
+                self.colour_panel.colours_changed()
+                self.albedo_panel.refresh()
+
+        self.run_job(run_on_rig, run_checker, rig, session, caller=self._ui, name="Measuring the colour checker",
+                     on_done=done, on_failed=lambda exc: self.show_error("Colour checker", exc))
+
+    def open_reference(self) -> None:
+        """The Albedo dock's Reference button: a picture from elsewhere beside the canvas, to pick colours in."""
+        if self.colour_panel is None or (image := self.colour_panel.open_reference()) is None:
+            return
+        self.reference_view.set_image(image)
+        self.reference_dock.show()
 
     # ================================================================== files
     def apply_noise_reduction(self, radius: int) -> None:

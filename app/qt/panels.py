@@ -31,6 +31,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from app.model.colour import linked_kappa
 from app.model.document import Document
 from app.model.noise import denoise_radius
 from app.model.target import KAPPA_MAX, KAPPA_MIN
@@ -210,17 +211,24 @@ class AlbedoPanel(QWidget):
     """κ of the current target: R, G, B log sliders with numeric entry, link toggle, reset.
 
     A slider drag is one undo step (begin/end gesture); typing a value is one step. Linked
-    channels scale by one factor, which stops where the first channel reaches the slider's
-    range, so the ratios (the hue of the change) are never lost. Earlier cascade targets are
-    locked after acquisition, with a tooltip saying why.
+    channels scale by one factor, which stops where the first channel reaches the range, so
+    the ratios (the hue of the change) are never lost. Earlier cascade targets are locked after
+    acquisition, with a tooltip saying why.
+
+    The range is 0 (black, typed) or 1/16 (the slider) up to the target's κ ceiling when its
+    colour was measured (``colour``: :class:`~app.qt.colour_panel.ColourPanel`; 1 / albedo with
+    a colour checker, else where the interreflection series diverges), else 16; with ``colour``
+    every κ is checked against the target's colour facts (an albedo of 1 or more is refused).
     """
 
     CHANNELS = ("R", "G", "B")
 
-    def __init__(self, document: Document, parent: QWidget | None = None):
+    def __init__(self, document: Document, parent: QWidget | None = None, *, colour=None):
         super().__init__(parent)
         self.doc = document
+        self.colour = colour
         self.uid = -1
+        self.high = np.full(3, KAPPA_MAX)  # top of the κ range per channel
         grid = QGridLayout(self)
         grid.setContentsMargins(0, 0, 0, 0)
         self.title = QLabel("No target selected", objectName="albedo_title")
@@ -238,7 +246,7 @@ class AlbedoPanel(QWidget):
             slider.setTickPosition(QSlider.TickPosition.TicksBelow)
             slider.setMinimumWidth(80)
             spin = QDoubleSpinBox(objectName=f"kappa_{name}_value")
-            spin.setRange(KAPPA_MIN, KAPPA_MAX)
+            spin.setRange(0.0, KAPPA_MAX)
             spin.setDecimals(4)
             spin.setStepType(QDoubleSpinBox.StepType.AdaptiveDecimalStepType)
             spin.setKeyboardTracking(False)
@@ -257,7 +265,7 @@ class AlbedoPanel(QWidget):
         self.reset = QPushButton("Reset", objectName="kappa_reset")
         self.reset.setToolTip("κ = 1: the original albedo")
         self.reset.clicked.connect(self._reset)
-        grid.addWidget(self.link, 4, 0, 1, 2)
+        grid.addWidget(self.link, 4, 0, 1, 2, Qt.AlignmentFlag.AlignLeft)  # clicks beside its text do not toggle it
         grid.addWidget(self.reset, 4, 2)
         self.note = QLabel(objectName="albedo_note")
         self.note.setWordWrap(True)
@@ -272,6 +280,10 @@ class AlbedoPanel(QWidget):
         self._on_current(document.current)
 
     # ------------------------------------------------------------------ model → controls
+    def refresh(self) -> None:
+        """Show the current target again (its κ range may have changed: a colour checker was measured)."""
+        self._on_current(self.doc.current)
+
     def _on_current(self, uid: int) -> None:
         self.uid = uid
         has = uid != -1
@@ -279,10 +291,13 @@ class AlbedoPanel(QWidget):
         for w in (*self.sliders, *self.spins, self.reset, self.link):
             w.setEnabled(has and not lock)
             w.setToolTip(lock) if lock else None
+        self._set_range(uid if has and not lock else -1)
         if not lock:
             self.reset.setToolTip("κ = 1: the original albedo")
-            for s in (*self.sliders, *self.spins):
-                s.setToolTip("Albedo scale κ of this channel (log scale, 1/16 … 16)")
+            for c, s in enumerate((*self.sliders, *self.spins)):
+                top = self.high[c % 3]
+                s.setToolTip(f"Albedo scale κ of this channel: log slider 1/16 … {top:.3g}, typed 0 (black) … "
+                             f"{top:.3g}" + (" (the measured limit)" if top != KAPPA_MAX else ""))
         if not has:
             self.title.setText("No target selected")
             self.note.setText("")
@@ -307,6 +322,16 @@ class AlbedoPanel(QWidget):
         if uid == self.uid:
             self._show(kappa)
 
+    def _set_range(self, uid: int) -> None:
+        """The controls' range: up to the target's κ ceiling (just below it: the ceiling itself is refused)."""
+        high = None if uid == -1 or self.colour is None else self.colour.kappa_high(uid)
+        self.high = np.full(3, KAPPA_MAX) if high is None else np.asarray(high, np.float64) * (1 - 1e-9)
+        for c in range(3):
+            top = math.floor(math.log2(max(min(self.high[c], KAPPA_MAX), KAPPA_MIN)) * TICKS_PER_STOP)
+            with QSignalBlocker(self.sliders[c]), QSignalBlocker(self.spins[c]):
+                self.sliders[c].setRange(kappa_to_ticks(KAPPA_MIN), max(top, kappa_to_ticks(KAPPA_MIN)))
+                self.spins[c].setMaximum(max(float(self.high[c]), KAPPA_MAX))
+
     def _show(self, kappa) -> None:
         for c in range(3):
             with QSignalBlocker(self.sliders[c]), QSignalBlocker(self.spins[c]):
@@ -322,17 +347,21 @@ class AlbedoPanel(QWidget):
         self.doc.end_kappa_gesture()
 
     def _on_slider(self, channel: int, ticks: int) -> None:
-        self._set(channel, ticks_to_kappa(ticks))
+        self._set(channel, ticks_to_kappa(ticks), low=KAPPA_MIN)
 
     def _on_spin(self, channel: int, value: float) -> None:
-        self._set(channel, float(value))
+        self._set(channel, float(value), low=0.0)
 
-    def _set(self, channel: int, value: float) -> None:
+    def _set(self, channel: int, value: float, *, low: float) -> None:
         if self.uid == -1:
             return
-        kappa = linked_kappa(self.doc.target(self.uid).kappa, channel, value, linked=self.link.isChecked())
+        kappa = linked_kappa(self.doc.target(self.uid).kappa, channel, value, linked=self.link.isChecked(), low=low,
+                             high=self.high)
         try:
-            self.doc.set_kappa(self.uid, kappa)
+            if self.colour is not None:
+                self.colour.apply_kappa(self.uid, kappa)
+            else:
+                self.doc.set_kappa(self.uid, kappa)
         except InputError as exc:
             QMessageBox.warning(self, "Albedo", str(exc))
         self._show(self.doc.target(self.uid).kappa)  # a linked move may have stopped at a limit
@@ -340,30 +369,6 @@ class AlbedoPanel(QWidget):
     def _reset(self) -> None:
         if self.uid != -1:
             self.doc.reset_kappa(self.uid)
-
-
-def linked_kappa(kappa, channel: int, value: float, *, linked: bool) -> np.ndarray:
-    """κ after setting ``channel`` to ``value``: alone, or with every channel by the same factor.
-
-    A linked change stops where the first channel reaches the slider range [1/16, 16], so the
-    ratios between channels (the hue of the change) never change.
-
-    Examples
-    --------
-    >>> linked_kappa([2.0, 0.125, 8.0], 2, 1.0, linked=True).tolist()  # G stops at 1/16: B can only halve
-    [1.0, 0.0625, 4.0]
-    >>> linked_kappa([2.0, 0.125, 8.0], 2, 1.0, linked=False).tolist()
-    [2.0, 0.125, 1.0]
-    """
-    k = np.array(kappa, dtype=np.float64)
-    if not linked or k[channel] <= 0:
-        k[channel] = value
-        return k
-    positive = k[k > 0]
-    lo = KAPPA_MIN / positive.min()
-    hi = KAPPA_MAX / positive.max()
-    factor = min(max(float(value) / k[channel], lo), hi)
-    return k * factor
 
 
 class NoiseReductionPanel(QWidget):

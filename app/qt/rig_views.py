@@ -264,7 +264,7 @@ class CoverageMap(QWidget):
             p.drawRect(r)
         y = area.bottom() + 6
         lines = self.legend_lines() if self.counts else [STATUS_COLOURS[q][1] for q in PixelStatus]
-        for code, line in zip(PixelStatus, lines):
+        for code, line in zip(PixelStatus, lines, strict=True):
             p.fillRect(QRectF(8, y + 3, 12, 12), QColor(STATUS_COLOURS[code][0]))
             p.setPen(self.palette().text().color())
             p.drawText(QRectF(26, y, self.width() - 30, self.LEGEND_ROW),
@@ -341,19 +341,19 @@ class ResponsePlot(QWidget):
             p.drawText(plot, Qt.AlignmentFlag.AlignCenter, "no calibration yet")
             p.end()
             return
-        for c, (label, colour) in enumerate(_CHANNELS):
+        for c, (_label, colour) in enumerate(_CHANNELS):
             fit = QPainterPath(pt(self.levels[0], self.fitted[0, c]))
-            for x, y in zip(self.levels[1:], self.fitted[1:, c]):
+            for x, y in zip(self.levels[1:], self.fitted[1:, c], strict=True):
                 fit.lineTo(pt(x, y))
             p.setPen(QPen(colour, 1, Qt.PenStyle.DashLine))
             p.drawPath(fit)
             meas = QPainterPath(pt(self.levels[0], self.measured[0, c]))
-            for x, y in zip(self.levels[1:], self.measured[1:, c]):
+            for x, y in zip(self.levels[1:], self.measured[1:, c], strict=True):
                 meas.lineTo(pt(x, y))
             p.setPen(QPen(colour, 1.6))
             p.drawPath(meas)
             p.setBrush(colour)
-            for x, y in zip(self.levels, self.measured[:, c]):
+            for x, y in zip(self.levels, self.measured[:, c], strict=True):
                 p.drawEllipse(pt(x, y), 2.2, 2.2)
             p.setBrush(Qt.BrushStyle.NoBrush)
         # legend, inside the plot's upper left
@@ -400,7 +400,8 @@ class ThumbnailStrip(QListWidget):
     def add_thumbnail(self, name: str, rgb: np.ndarray) -> QListWidgetItem:
         """Append a thumbnail made by :meth:`make_thumbnail`."""
         pix = QPixmap.fromImage(rgb_to_qimage(rgb)).scaled(
-            self.thumb_size, self.thumb_size, Qt.AspectRatioMode.KeepAspectRatio, Qt.TransformationMode.FastTransformation)
+            self.thumb_size, self.thumb_size, Qt.AspectRatioMode.KeepAspectRatio,
+            Qt.TransformationMode.FastTransformation)
         item = QListWidgetItem(QIcon(pix), name.removeprefix("acq-").removeprefix("cal-"))
         item.setToolTip(name)
         item.setData(Qt.ItemDataRole.UserRole, name)

@@ -113,8 +113,8 @@ class Renderer:
         self.shape_ids = [s.id() for s in self.scene.shapes()]
         self._emitter_keys = self._ambient_keys()
         self._saved = {k: self._get(k) for k in self._emitter_keys}
-        self._ambient_image = None
-        self._lights = None
+        self._ambient_image: np.ndarray | None = None
+        self._lights: tuple[bool, str | None] | None = None  # (ambient on, hash of the emitted pattern)
 
     # --- building -------------------------------------------------------------------------
     def _scene_dict(self, mi, projector: str):

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -207,7 +209,7 @@ def look_at(pose: dict | object, *, mirror: bool):
     """A Mitsuba ``to_world`` for a pinhole pose (``position``, ``look_at``, ``up``)."""
     import mitsuba as mi
 
-    get = pose.get if isinstance(pose, dict) else lambda k, d=None: getattr(pose, k, d)
+    get: Callable[..., Any] = pose.get if isinstance(pose, dict) else lambda k, d=None: getattr(pose, k, d)
     tw = mi.ScalarTransform4f().look_at(
         origin=[float(x) for x in get("position")],
         target=[float(x) for x in get("look_at")],

@@ -147,7 +147,7 @@ class Truth:
     def emitters(self) -> np.ndarray:
         """(H, W) bool: pixels that see a light source directly (any part of their footprint)."""
         lamps = [k for k, s in enumerate(self._r.scene.shapes()) if s.emitter() is not None]
-        return (self._coverage[lamps] > 0).any(axis=0) if lamps else np.zeros(self.shape, bool)
+        return np.any(self._coverage[lamps] > 0, axis=0) if lamps else np.zeros(self.shape, bool)
 
     def components(self, mask, order, **_):
         """Not available: see the Notes.

@@ -58,6 +58,9 @@ class VirtualRig(Rig):
         The precomputed transport (for tests and benchmarks).
     """
 
+    camera: VirtualCamera
+    projector: VirtualProjector
+
     def __init__(self, name, camera, projector, *, targets, truth, renderer: Renderer, coverage=None, fingerprint=None):
         super().__init__(name, camera, projector, targets=targets, truth=truth, fingerprint=fingerprint)
         self.coverage = dict(coverage or {})

@@ -272,10 +272,12 @@ def occluded(start: np.ndarray, end: np.ndarray, quads: Quads, *, group: np.ndar
     >>> q = Quads(np.array([[-1.0, -1, 1]]), np.array([[2.0, 0, 0]]), np.array([[0.0, 2, 0]]))
     >>> occluded(np.zeros((2, 3)), np.array([[0.0, 0, 2], [5.0, 0, 2]]), q).tolist()
     [True, False]
+    >>> occluded(np.zeros((2, 3)), np.array([[0.0, 0, 2], [5.0, 0, 2]]), q, group=np.array([0, 1])).tolist()
+    [True, False]
     """
     n = len(start)
     out = np.zeros(n, bool)
-    if group is None:
+    if group is None or blockers is None:
         _occluded_by(start, end, quads, np.arange(len(quads)), out, np.arange(n))
         return out
     order = np.argsort(group, kind="stable")

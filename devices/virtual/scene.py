@@ -33,6 +33,9 @@ optionally restricted to the sub-rectangle ``[a0, b0, a1, b1]`` of local coordin
 scene's natural lighting, a hint for tools: the ambient light on or off, and a uniform
 projector input level (0 = projector black). ``patch_size`` (metres) sets the grid on which
 indirect light is computed.
+
+Over 500 lines on purpose: the scene file's whole schema (quads, boxes, textures, lighting) is
+validated in one place, so every message about a bad scene file comes from the same rules.
 """
 
 from __future__ import annotations
@@ -100,6 +103,7 @@ class Texture:
         a = np.clip(np.asarray(a, np.float64), 0.0, 1.0)
         b = np.clip(np.asarray(b, np.float64), 0.0, 1.0)
         if self.kind == "image":
+            assert self.image is not None  # an image texture always holds its image
             hi, wi = self.image.shape[:2]
             col = np.minimum((a * wi).astype(np.int64), wi - 1)
             row = np.minimum((b * hi).astype(np.int64), hi - 1)
@@ -108,13 +112,18 @@ class Texture:
         iu = np.minimum((a * nu).astype(np.int64), nu - 1)
         iv = np.minimum((b * nv).astype(np.int64), nv - 1)
         odd = (iu + (iv if self.kind == "checker" else 0)) % 2 == 1
+        assert self.albedo is not None  # a pattern always holds its second albedo
         return np.where(odd[:, None], self.albedo[None, :], base[None, :])
 
     def cell(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(N,) int64 id of the texel (image) or pattern cell at ``a``, ``b`` (for edge detection)."""
         a = np.clip(np.asarray(a, np.float64), 0.0, 1.0)
         b = np.clip(np.asarray(b, np.float64), 0.0, 1.0)
-        nu, nv = (self.image.shape[1], self.image.shape[0]) if self.kind == "image" else self.cells
+        if self.kind == "image":
+            assert self.image is not None  # an image texture always holds its image
+            nu, nv = self.image.shape[1], self.image.shape[0]
+        else:
+            nu, nv = self.cells
         iu = np.minimum((a * nu).astype(np.int64), nu - 1)
         iv = np.minimum((b * nv).astype(np.int64), nv - 1)
         return iv * nu + iu
@@ -225,7 +234,8 @@ def load_scene(name_or_path: str | Path) -> Scene:
     else:
         path = SCENE_DIR / f"{text}.json"
         if not path.is_file():
-            raise InputError(f"unknown virtual scene {text!r}; expected one of {scene_names()} or a path to a .json file")
+            raise InputError(f"unknown virtual scene {text!r}; "
+                             f"expected one of {scene_names()} or a path to a .json file")
     try:
         if not path.exists():
             raise InputError(f"cannot read scene file {str(path)!r}: there is no such file")
@@ -317,7 +327,8 @@ def parse_scene(data: dict, *, default_name: str = "scene", base_dir: Path | Non
 
     targets_in = data["targets"]
     if not isinstance(targets_in, dict):
-        raise InputError(f"targets must be an object mapping target names to lists of surfaces, got {type(targets_in).__name__}")
+        raise InputError("targets must be an object mapping target names to lists of surfaces, "
+                         f"got {type(targets_in).__name__}")
     targets = {}
     for tname, pieces in targets_in.items():
         where = f"targets[{tname!r}]"
@@ -333,7 +344,8 @@ def parse_scene(data: dict, *, default_name: str = "scene", base_dir: Path | Non
             rect = _vec(piece.get("rect", [0, 0, 1, 1]), f"{pw}.rect", 4, lo=0.0, hi=1.0)
             if rect[2] <= rect[0] or rect[3] <= rect[1]:
                 raise InputError(f"{pw}.rect must be [a0, b0, a1, b1] with a0 < a1 and b0 < b1, got {rect.tolist()}")
-            out.append((names.index(sname), tuple(float(r) for r in rect)))
+            a0, b0, a1, b1 = (float(r) for r in rect)
+            out.append((names.index(sname), (a0, b0, a1, b1)))
         targets[str(tname)] = out
 
     lighting = _obj(data.get("lighting", {}), "lighting", required=(), optional=("ambient", "projector_flood"))
@@ -370,7 +382,7 @@ def _texture(value, where: str, base_dir: Path) -> tuple[Texture, str]:
                              "(a PNG or TIFF file, relative to the scene file)")
         if img.dtype not in (np.uint8, np.uint16):
             raise InputError(f"{where}.image must be an 8- or 16-bit image, got {img.dtype}")
-        top = float(np.iinfo(img.dtype).max)
+        top = 255.0 if img.dtype == np.uint8 else 65535.0
         img = img.astype(np.float64) / top
         if img.ndim == 2:
             img = np.repeat(img[:, :, None], 3, axis=2)

@@ -30,6 +30,9 @@ the arrays every capture reuses:
 Arrays are stored as ``.npz`` (never pickle), keyed by a hash of the scene file's content,
 the options that change geometry and :data:`MODEL_VERSION`; a missing or corrupt cache file
 is rebuilt, and deleting the cache directory is always safe.
+
+Over 500 lines on purpose: geometry sampling, the radiosity solve and the set-up cache are one
+versioned computation (:data:`MODEL_VERSION` covers all three).
 """
 
 from __future__ import annotations
@@ -194,6 +197,7 @@ def views(scene: Scene, geometry: Geometry) -> tuple[View, View]:
     if geometry.projector == "coaxial":
         return camera, camera.rescaled(geometry.projector_resolution)
     p = scene.projector_offset
+    assert p is not None  # open_rig refuses an offset projector on a scene without one
     return camera, View.look_at(p.position, p.look_at, p.up, p.fov_deg, geometry.projector_resolution)
 
 
@@ -312,15 +316,16 @@ def patch_to_patch(scene: Scene, setup: Setup, *, per_edge: int = 4) -> np.ndarr
     """
     quads = scene.quads
     nu, nv, offset = _grid_of(setup, len(quads))
-    qs, aa, bb, pp = [], [], [], []
+    q_parts, a_parts, b_parts, p_parts = [], [], [], []
     for q in range(len(quads)):
         gu, gv = nu[q] * per_edge, nv[q] * per_edge
         a, b = np.meshgrid((np.arange(gu) + 0.5) / gu, (np.arange(gv) + 0.5) / gv, indexing="ij")
-        qs.append(np.full(a.size, q))
-        aa.append(a.ravel())
-        bb.append(b.ravel())
-        pp.append((offset[q] + (np.arange(gu) // per_edge)[:, None] * nv[q] + (np.arange(gv) // per_edge)[None, :]).ravel())
-    qs, aa, bb, pp = map(np.concatenate, (qs, aa, bb, pp))
+        q_parts.append(np.full(a.size, q))
+        a_parts.append(a.ravel())
+        b_parts.append(b.ravel())
+        patch_u, patch_v = np.arange(gu) // per_edge, np.arange(gv) // per_edge
+        p_parts.append((offset[q] + patch_u[:, None] * nv[q] + patch_v[None, :]).ravel())
+    qs, aa, bb, pp = map(np.concatenate, (q_parts, a_parts, b_parts, p_parts))
     node_offset = np.concatenate([[0], np.cumsum((nu + 1) * (nv + 1))])
     w = _interpolation(aa, bb, qs, np.ones(len(qs), bool), nu, nv, node_offset, setup.gn.shape[0])
     n_p = len(setup.patch_area)
@@ -435,15 +440,15 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
 
     # --- hidden samples ------------------------------------------------------------------
     nu, nv, offset = patch_grid(scene, geometry.patch_size)
-    hq, ha, hb, harea = [], [], [], []
+    q_parts, a_parts, b_parts, area_parts = [], [], [], []
     for q in range(len(quads)):
         gu, gv = nu[q] * HIDDEN_PER_PATCH, nv[q] * HIDDEN_PER_PATCH
         a, b = np.meshgrid((np.arange(gu) + 0.5) / gu, (np.arange(gv) + 0.5) / gv, indexing="ij")
-        hq.append(np.full(a.size, q))
-        ha.append(a.ravel())
-        hb.append(b.ravel())
-        harea.append(np.full(a.size, quads.area[q] / (gu * gv)))
-    hq, ha, hb, harea = map(np.concatenate, (hq, ha, hb, harea))
+        q_parts.append(np.full(a.size, q))
+        a_parts.append(a.ravel())
+        b_parts.append(b.ravel())
+        area_parts.append(np.full(a.size, quads.area[q] / (gu * gv)))
+    hq, ha, hb, harea = map(np.concatenate, (q_parts, a_parts, b_parts, area_parts))
     hpoints = quads.point(hq, ha, hb)
     seen = _seen_by(camera, pixel_quad, hpoints, hq, normal)
     seen_pixel, _ = camera.nearest_pixel(hpoints[seen])
@@ -503,7 +508,7 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
         # light would make the polygon formula singular
         inner = quads.point(quad[sel], np.clip(a[sel], NODE_INSET, 1 - NODE_INSET),
                             np.clip(b[sel], NODE_INSET, 1 - NODE_INSET))
-        light_ff[sel, k] = _form_factor_to_quad(inner, normal[quad[sel]], quad[sel], quads, lq, LIGHT_SAMPLES)
+        light_ff[sel, k] = _form_factor_to_quad(inner, normal[quad[sel]], quad[sel], quads, int(lq), LIGHT_SAMPLES)
 
     report(progress, 3, steps, "projector")
     pdirs = projector.pixel_directions()
@@ -531,7 +536,8 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
 
     report(progress, steps, steps, "set-up done")
     return Setup(quad=quad, a=a, b=b, points=points, area=area, patch=patch,
-                 patch_quad=patch_quad, patch_area=patch_area, patch_nu=nu, patch_nv=nv, mavg=mavg, interp=interp, gn=gn,
+                 patch_quad=patch_quad, patch_area=patch_area, patch_nu=nu, patch_nv=nv, mavg=mavg, interp=interp,
+                 gn=gn,
                  light_quads=light_quads, light_ff=light_ff, proj_index=proj_index, proj_lit=lit,
                  proj_factor=proj_factor, proj_xy=proj_xy, pixel_quad=pixel_quad,
                  resolution=np.array(geometry.resolution), projector_resolution=np.array(geometry.projector_resolution),
@@ -567,7 +573,8 @@ def _mixed_pixels(scene: Scene, camera: View, projector: View, pixel_quad, a, b,
     return np.flatnonzero(out.ravel())
 
 
-def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray, normal: np.ndarray) -> np.ndarray:
+def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray,
+             normal: np.ndarray) -> np.ndarray:
     """Whether each point (on ``quad``) is what its nearest pixel of ``view`` sees.
 
     A pixel's ray and a point projecting into that pixel meet the same plane within the
@@ -592,20 +599,20 @@ def _node_grid(quads: Quads, nu, nv) -> tuple[np.ndarray, np.ndarray, np.ndarray
     node_offset : (Q + 1,) int64
         First node of each quad; node ``(i, j)`` of quad ``q`` is ``node_offset[q] + i * (nv + 1) + j``.
     """
-    qs, aa, bb = [], [], []
+    q_parts, a_parts, b_parts = [], [], []
     for q in range(len(quads)):
         a, b = np.meshgrid(np.arange(nu[q] + 1) / nu[q], np.arange(nv[q] + 1) / nv[q], indexing="ij")
-        qs.append(np.full(a.size, q))
-        aa.append(np.clip(a.ravel(), NODE_INSET, 1 - NODE_INSET))
-        bb.append(np.clip(b.ravel(), NODE_INSET, 1 - NODE_INSET))
-    qs, aa, bb = map(np.concatenate, (qs, aa, bb))
+        q_parts.append(np.full(a.size, q))
+        a_parts.append(np.clip(a.ravel(), NODE_INSET, 1 - NODE_INSET))
+        b_parts.append(np.clip(b.ravel(), NODE_INSET, 1 - NODE_INSET))
+    qs, aa, bb = map(np.concatenate, (q_parts, a_parts, b_parts))
     offset = np.concatenate([[0], np.cumsum((nu + 1) * (nv + 1))])
     return quads.point(qs, aa, bb), qs, offset
 
 
 def _interpolation(a, b, q, live, nu, nv, node_offset, n_nodes) -> sp.csr_matrix:
     """Bilinear weights from the four nodes around each sample (rows sum to 1, 0 if inert)."""
-    cols, vals = [], []
+    col_parts, val_parts = [], []
     parts = []
     for coord, n in ((a, nu[q]), (b, nv[q])):
         f = np.clip(coord, 0.0, 1.0) * n
@@ -616,11 +623,11 @@ def _interpolation(a, b, q, live, nu, nv, node_offset, n_nodes) -> sp.csr_matrix
     stride = nv[q] + 1
     for ui, wu in ((u0, 1 - fu), (u0 + 1, fu)):
         for vi, wv in ((v0, 1 - fv), (v0 + 1, fv)):
-            cols.append(base + ui * stride + vi)
-            vals.append(wu * wv)
+            col_parts.append(base + ui * stride + vi)
+            val_parts.append(wu * wv)
     rows = np.tile(np.arange(len(a)), 4)
-    vals = np.concatenate(vals) * np.tile(live, 4)
-    cols = np.where(np.tile(live, 4), np.concatenate(cols), 0)
+    vals = np.concatenate(val_parts) * np.tile(live, 4)
+    cols = np.where(np.tile(live, 4), np.concatenate(col_parts), 0)
     m = sp.coo_matrix((vals, (rows, cols)), shape=(len(a), n_nodes)).tocsr()
     m.eliminate_zeros()
     return m
@@ -641,8 +648,7 @@ def _patch_corners(quads: Quads, nu, nv) -> np.ndarray:
 def _sub_points(corners: np.ndarray, m: int) -> np.ndarray:
     """(N, m*m, 3) points at the centres of an m x m grid on each parallelogram."""
     s = (np.arange(m) + 0.5) / m
-    a, b = np.meshgrid(s, s, indexing="ij")
-    a, b = a.ravel(), b.ravel()
+    a, b = (g.ravel() for g in np.meshgrid(s, s, indexing="ij"))
     o = corners[:, 0]
     u = corners[:, 1] - o
     v = corners[:, 3] - o

@@ -78,6 +78,8 @@ class Resolvent:
         (Ns, 3), dtype of ``x``
         """
         b = self.setup.gn @ self.patch_radiance(x)
+        out: np.ndarray
+        rho: np.ndarray
         if x.dtype == np.float32:
             out, rho = self._interp32 @ b.astype(np.float32), self._rho32
         else:

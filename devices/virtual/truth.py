@@ -77,7 +77,8 @@ class Truth:
         self.projector_model = projector_model
         self.camera_model = camera_model
         self.scene = renderer.scene
-        self._proj_res = tuple(projector_resolution)
+        hp, wp = projector_resolution
+        self._proj_res = (hp, wp)
         self.shape = renderer.shape
 
     # --- helpers --------------------------------------------------------------------------

@@ -4,7 +4,8 @@ Pattern generators return lazy sequences of float32 ``(Hp, Wp, 3)`` projector im
 [0, 1]; fitting functions take captures as float ``(H, W, 3)`` linear radiance (Gray-code
 decoding also takes uint8/uint16 and grey images).
 
-- :mod:`~engine.calibrate.exposure`: :func:`black_frame`, :func:`exposure_report`, :class:`AutoExposure`, :func:`projector_lit`.
+- :mod:`~engine.calibrate.exposure`: :func:`black_frame`, :func:`exposure_report`, :class:`AutoExposure`,
+  :func:`projector_lit`.
 - :mod:`~engine.calibrate.response`: :func:`ramp_levels`, :func:`response_patterns`,
   :func:`fit_response` → :class:`ProjectorResponse` (``forward``, ``linearize``).
 - :mod:`~engine.calibrate.graycode`: :func:`gray_code_patterns`, :func:`decode_gray_code`

@@ -72,6 +72,7 @@ class Crosstalk:
         inv = np.linalg.inv(m)
         inv.flags.writeable = False
         object.__setattr__(self, "matrix", m)
+        self._inverse: np.ndarray  # declared for type checkers; set like matrix (the class is frozen)
         object.__setattr__(self, "_inverse", inv)
 
     @classmethod

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.calibrate._common import Patterns
-from engine.checks import check_image, check_images, check_mask, check_resolution
+from engine.checks import check_image, check_images, check_mask, check_resolution, float_dtype
 from engine.errors import InputError
 
 __all__ = ["DirectImage", "direct_image", "high_frequency_patterns"]
@@ -170,7 +170,7 @@ def direct_image(captures, *, black_fraction=0.0, ambient=None, target=None) -> 
     (0.6, 0.2)
     """
     caps = check_images("captures", captures, min_count=2)
-    dtype = np.float64 if any(c.dtype == np.float64 for c in caps) else np.float32
+    dtype = float_dtype(*caps)
     b = np.asarray(black_fraction, dtype=np.float64)
     if b.ndim == 0:
         b = np.full(3, float(b))

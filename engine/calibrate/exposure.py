@@ -147,11 +147,12 @@ def exposure_report(
         scale = float(peak.max())
     else:
         scale = check_positive("full_scale", full_scale)
+    sat_frac: float | None
     if no_clip:
         sat_frac = 0.0
     elif saturated is not None:
         sat = check_mask("saturated", saturated, (h, w))[sel]
-        sat_frac: float | None = float(sat.mean())
+        sat_frac = float(sat.mean())
     elif full_scale is not None:
         sat_frac = float(np.mean(peak >= scale))
     else:

@@ -9,6 +9,9 @@ References
 ----------
 S. Inokuchi, K. Sato, F. Matsuda, "Range imaging system for 3-D object recognition", ICPR 1984
 (cited by the paper, Sec. 6, for its correspondences).
+
+Over 500 lines on purpose: pattern generation, decoding and the decode-quality checks of one
+code must agree bit for bit, so they live together.
 """
 
 from __future__ import annotations
@@ -388,6 +391,8 @@ def decode_gray_code(
         wb = (_as_grey("white", white, shape), _as_grey("black", black, shape))
 
     # Defaults follow OpenCV for integer captures and a fraction of full scale for float ones.
+    t_def: float
+    s_def: float
     if kind == np.uint8:
         scale, t_def, s_def = 1.0, UINT8_THRESHOLD, UINT8_SHADOW_THRESHOLD
     elif kind == np.uint16:
@@ -399,7 +404,7 @@ def decode_gray_code(
         t_def, s_def = FLOAT_THRESHOLD, FLOAT_SHADOW_THRESHOLD
         if wb is not None:
             t_def, s_def = FLOAT_FLOOR, FLOAT_SHADOW_FLOOR
-    thr = t_def * scale if threshold is None else float(threshold)
+    thr: float | np.ndarray = t_def * scale if threshold is None else float(threshold)
     sthr = s_def * scale if shadow_threshold is None else float(shadow_threshold)
     if not np.isfinite(thr) or thr < 0:
         raise InputError(f"threshold must be a finite number ≥ 0 in image units, got {threshold!r}")

@@ -104,7 +104,7 @@ def response_patterns(levels, projector_resolution, *, channels: str = "together
     mode = RampChannels(check_choice("channels", channels, RampChannels))
     if mode is RampChannels.TOGETHER:
         names = [f"ramp grey {v:.4f}" for v in lv]
-        recipe = [(v, None) for v in lv]
+        recipe: list[tuple[float, int | None]] = [(v, None) for v in lv]
     else:
         names = [f"ramp {c} {v:.4f}" for c in ("red", "green", "blue") for v in lv]
         recipe = [(v, c) for c in range(3) for v in lv]
@@ -394,7 +394,7 @@ def fit_response(
             )
     raw = (curve - curve[0]) / (curve[-1] - curve[0])
     drops = raw[:-1] - raw[1:]
-    k, c = np.unravel_index(np.argmax(drops), drops.shape)
+    k, c = map(int, np.unravel_index(np.argmax(drops), drops.shape))
     if drops[k, c] > tolerance:
         raise InputError(
             f"captures: the measured response is not monotonic: {names[c]} light went down from "

@@ -119,15 +119,15 @@ def estimate_hole_radius(correspondence: Correspondence, *, target=None) -> int:
     corr = _check_correspondence(correspondence)
     use = _sources(corr, target)
     x, y = corr.x.astype(np.float32), corr.y.astype(np.float32)
-    steps = []
+    step_parts = []
     for axis in (0, 1):
         a = [slice(None)] * 2
         b = [slice(None)] * 2
         a[axis], b[axis] = slice(1, None), slice(None, -1)
         both = use[tuple(a)] & use[tuple(b)]
         d = np.maximum(np.abs(x[tuple(a)] - x[tuple(b)]), np.abs(y[tuple(a)] - y[tuple(b)]))
-        steps.append(d[both])
-    steps = np.concatenate(steps)
+        step_parts.append(d[both])
+    steps = np.concatenate(step_parts)
     if steps.size == 0:
         return 1
     return max(1, int(np.ceil(np.percentile(steps, 90) / 2)))
@@ -270,8 +270,8 @@ def warp_to_projector(
             size = (2 * r + 1, 2 * r + 1)
             w = cv2.boxFilter(hit.astype(np.float32), -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
             for c in range(out.shape[2]):
-                s = cv2.boxFilter(out[..., c], -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
-                out[..., c][holes] = s[holes] / w[holes]  # w > 0: every closed pixel is within r of a hit
+                total = cv2.boxFilter(out[..., c], -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)
+                out[..., c][holes] = total[holes] / w[holes]  # w > 0: every closed pixel is within r of a hit
     return out[..., 0] if plane else out
 
 

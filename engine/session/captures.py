@@ -39,7 +39,7 @@ def write(file: Path, image: np.ndarray, saturated: np.ndarray | None, embedded:
         The write failed (nothing left under ``file``).
     """
     pixels = image.astype(np.float32, copy=False)
-    channels = ("R", "G", "B")
+    channels: tuple[str, ...] = ("R", "G", "B")
     if saturated is not None:
         pixels = np.concatenate([pixels, saturated[..., None].astype(np.float32)], axis=2)
         channels += (SATURATED_CHANNEL,)

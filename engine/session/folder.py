@@ -600,29 +600,37 @@ class Session:
         except (InputError, OSError, ValueError, EOFError) as exc:
             raise SessionError(f"calibration array {key!r}: cannot read {file}: {exc}") from exc
 
-    def write_calibration(self, data: dict, arrays: dict[str, dict[str, np.ndarray]] | None = None) -> None:
+    def write_calibration(self, data: dict, arrays: dict[str, dict[str, np.ndarray]] | None = None, *,
+                          keep: tuple[str, ...] = ()) -> None:
         """Replace the whole calibration: JSON ``data`` and arrays ``{group: {name: array}}``.
 
         Arrays of a previous calibration not in ``arrays`` are dropped (their files deleted
-        after the manifest is updated). Array files are written first, the manifest once at the end.
+        after the manifest is updated), except those of the groups in ``keep`` (measurements
+        of the scene stored beside the calibration, such as :mod:`engine.session.colour`'s).
+        Array files are written first, the manifest once at the end.
         """
         data = to_json("calibration data", data)
         if not isinstance(data, dict):
             raise InputError(f"calibration data must be a dict, got {type(data).__name__}")
-        self._write_arrays(arrays or {}, data=data, replace=True)
+        self._write_arrays(arrays or {}, data=data, replace=True, keep=tuple(keep))
 
-    def read_calibration(self) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
-        """Return ``(data, arrays)`` as given to :meth:`write_calibration` (and :meth:`write_array`)."""
+    def read_calibration(self, *, groups: tuple[str, ...] | None = None) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+        """Return ``(data, arrays)`` as given to :meth:`write_calibration` (and :meth:`write_array`).
+
+        ``groups`` limits the arrays read to those groups (``()``: the JSON data alone).
+        """
         with self._lock:
             data = copy.deepcopy(self._manifest["calibration"]["data"])
             keys = list(self._manifest["calibration"]["arrays"])
         arrays: dict[str, dict[str, np.ndarray]] = {}
         for key in keys:
             group, name = key.split("/", 1)
+            if groups is not None and group not in groups:
+                continue
             arrays.setdefault(group, {})[name] = self.read_array(group, name)
         return data, arrays
 
-    def _write_arrays(self, arrays, *, data, replace: bool) -> None:
+    def _write_arrays(self, arrays, *, data, replace: bool, keep: tuple[str, ...] = ()) -> None:
         if not isinstance(arrays, dict):
             raise InputError(f"arrays must be a dict {{group: {{name: array}}}}, got {type(arrays).__name__}")
         prepared = []
@@ -647,7 +655,8 @@ class Session:
             new = copy.deepcopy(self._manifest)
             before = {e["file"] for e in new["calibration"]["arrays"].values()}
             if replace:
-                new["calibration"]["arrays"] = written
+                new["calibration"]["arrays"] = {key: entry for key, entry in new["calibration"]["arrays"].items()
+                                                if key.split("/", 1)[0] in keep} | written
             else:
                 new["calibration"]["arrays"].update(written)
             if data is not None:

@@ -7,13 +7,15 @@ read. A refusal names the field's path as it appears in the file, e.g.
 ``state.plan.order must be an integer in [1, 8] or 'auto', got '3'``.
 
 The JSON state holds the acquisition plan (:func:`engine.workflow.capture_plan`), its status
-and result, and the saved edit (:mod:`engine.session.edit`); other keys are free JSON for
+and result, the saved edit (:mod:`engine.session.edit`) and the colour facts
+(:mod:`engine.session.colour`); other keys are free JSON for
 callers, but the known ones are checked field by field.
 """
 
 from __future__ import annotations
 
 from engine.figurate import MAX_ORDER
+from engine.session.colour import COLOUR_SPEC
 from engine.session.edit import EDIT_SPEC, LEGACY_APP_EDIT_SPEC, LEGACY_CLI_EDIT_SPEC
 from engine.session.paths import NAME
 from engine.session.spec import (
@@ -119,6 +121,7 @@ STATE = Obj(
         "edits": LEGACY_APP_EDIT_SPEC,
         "photograph": NAME_SPEC,
         "order": Int(1),
+        "colour": COLOUR_SPEC,
     },
     extra=ANY,
 )

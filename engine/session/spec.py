@@ -243,11 +243,11 @@ class Obj(Spec):
         for key, item in value.items():
             if key in self.required:
                 continue
-            spec = self.optional.get(key, self.extra)
-            if spec is None:
+            item_spec = self.optional.get(key, self.extra)
+            if item_spec is None:
                 known = sorted(self.required) + sorted(self.optional)
                 raise Invalid(join(path, key), f"absent (not a known field; known: {', '.join(known)})", item)
-            spec.check(item, join(path, key))
+            item_spec.check(item, join(path, key))
 
 
 class Map(Spec):

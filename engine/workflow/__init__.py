@@ -14,6 +14,9 @@ rather than repeating their checks:
 - :mod:`~engine.workflow.decomposition`: :func:`load_decomposition` reads a decomposition from
   the session's cache, or recomputes it from the session's own captures when the cache is
   gone or unusable (no rig needed);
+- :mod:`~engine.workflow.colour`: :func:`run_checker` measures a colour checker into the
+  session, :func:`target_colour` tells a target's colour and, with the checker, its absolute
+  albedo (each target's D is kept by :func:`run_capture`);
 - :mod:`~engine.workflow.edit`: the saved edit (:mod:`engine.session.edit`), read by
   :func:`saved_edit` (including what older versions wrote) and written by :func:`save_edit`.
 """
@@ -40,6 +43,15 @@ from engine.workflow.capture import (
     preflight,
     run_capture,
 )
+from engine.workflow.colour import (
+    RELATIVE,
+    run_checker,
+    saved_checker,
+    store_directs,
+    target_albedo,
+    target_colour,
+    target_direct,
+)
 from engine.workflow.decomposition import (
     cached_decomposition,
     decomposition_key,
@@ -51,9 +63,10 @@ from engine.workflow.decomposition import (
 from engine.workflow.edit import edit_from_plan, save_edit, saved_edit
 
 __all__ = [
-    "MAX_FRAMES", "CaptureResult", "Preflight", "Unreachable", "adopt_calibration", "cached_decomposition",
+    "MAX_FRAMES", "RELATIVE", "CaptureResult", "Preflight", "Unreachable", "adopt_calibration", "cached_decomposition",
     "calibration_problems", "capture_plan", "check_frames", "check_rig", "check_targets", "decomposition_key",
     "denoised_key", "edit_from_plan", "estimated_report", "load_calibration", "load_compatible_calibration",
     "load_decomposition", "noise_reduced", "open_session_for_rig", "photograph_name", "preflight",
-    "run_calibration", "run_capture", "save_calibration", "save_edit", "saved_edit",
+    "run_calibration", "run_capture", "run_checker", "save_calibration", "save_edit", "saved_checker", "saved_edit",
+    "store_directs", "target_albedo", "target_colour", "target_direct",
 ]

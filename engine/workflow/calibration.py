@@ -10,6 +10,7 @@ from engine.errors import InputError, SessionError
 from engine.progress import Progress, ShouldStop
 from engine.rig import fingerprint_differences, fingerprint_of
 from engine.session import Session
+from engine.session.colour import COLOUR_GROUP
 
 __all__ = [
     "adopt_calibration", "calibration_problems", "check_rig", "load_calibration", "load_compatible_calibration",
@@ -55,9 +56,9 @@ def open_session_for_rig(path, rig) -> Session:
 
 
 def save_calibration(session: Session, calibration: Calibration) -> None:
-    """Store a calibration in a session (JSON + lossless arrays)."""
+    """Store a calibration in a session (JSON + lossless arrays), keeping the session's colour facts."""
     meta, arrays = calibration.to_dict()
-    session.write_calibration(meta, {_CALIBRATION_GROUP: arrays})
+    session.write_calibration(meta, {_CALIBRATION_GROUP: arrays}, keep=(COLOUR_GROUP,))
 
 
 def load_calibration(session: Session) -> Calibration:
@@ -68,7 +69,7 @@ def load_calibration(session: Session) -> Calibration:
     SessionError
         The session has none, or it is malformed (the message says what and to recalibrate).
     """
-    meta, arrays = session.read_calibration()
+    meta, arrays = session.read_calibration(groups=(_CALIBRATION_GROUP,))
     if not meta:
         raise SessionError(f"session {session.path} has no calibration: calibrate the rig into it first "
                            "(`albedit calibrate`, or Calibrate the rig… in the app)")
@@ -107,7 +108,7 @@ def adopt_calibration(session: Session, calibration: Calibration) -> None:
     SessionError
         The session already has a different calibration.
     """
-    mine = session.read_calibration()[0]
+    mine = session.read_calibration(groups=())[0]
     if mine and mine != calibration.to_dict()[0]:
         raise SessionError(f"session {session.path} already has a different calibration; use a new session folder")
     if not mine:

@@ -18,6 +18,7 @@ from engine.progress import Progress, ShouldStop
 from engine.session import Session
 from engine.session.edit import check_target_name, mask_digest, mask_name
 from engine.workflow.calibration import check_rig, load_calibration
+from engine.workflow.colour import store_directs
 from engine.workflow.decomposition import decomposition_key
 
 __all__ = [
@@ -253,7 +254,8 @@ def run_capture(
     :func:`engine.session.edit.mask_name`; re-running with the same session resumes. The last
     target's decomposition is cached under :func:`decomposition_key`, weighted by the
     observations' noise and with its covariance when the camera's noise is known
-    (:func:`engine.recolor.recolor_variance` then predicts a recolor's σ).
+    (:func:`engine.recolor.recolor_variance` then predicts a recolor's σ), and every target's D
+    is kept (:mod:`engine.session.colour`: absolute albedo with a colour checker).
 
     Returns
     -------
@@ -280,6 +282,7 @@ def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, ad
                              settings=settings, adaptive=adaptive, photograph_pattern=photograph_pattern)
     last = result.targets[-1][1]
     session.write_mask(mask_name(f"{targets[-1][0]} emittable", mask_digest(last.mask)), last.mask)
+    store_directs(session, result.targets)
     d = last.decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
     session.update(
         status="captured",

@@ -42,7 +42,7 @@ def decomposition_key(session: Session) -> str:
     blob = json.dumps({
         "plan": session.state.get("plan"),
         "captures": sorted((c.name, c.sha256) for c in session.captures),
-        "calibration": session.read_calibration()[0],
+        "calibration": session.read_calibration(groups=())[0],
         "code": [version, DECOMPOSITION_VERSION],
     }, sort_keys=True).encode()
     return "decomposition-" + hashlib.sha256(blob).hexdigest()[:16]

@@ -45,7 +45,7 @@ def write_dng(mosaic, *, black: int = 64, white: int = 4000, cfa=(0, 1, 1, 2), o
             b = b"".join(struct.pack("<" + fmt, *v) for v in values)
             count = len(values)
         else:
-            b = struct.pack("<%d%s" % (len(values), fmt), *values)
+            b = struct.pack(f"<{len(values)}{fmt}", *values)
             count = len(values)
         entries.append((tag, typ, count, b))
 

@@ -61,7 +61,8 @@ class Script:
             assert self.used < len(self.steps), f"unexpected call {method}{args}: script exhausted"
             want, want_args, result = self.steps[self.used]
             shown = tuple(a.value if isinstance(a, Widget) else a for a in args)
-            assert (method, shown) == (want, tuple(want_args)), f"call {self.used}: got {method}{shown}, expected {want}{tuple(want_args)}"
+            assert (method, shown) == (want, tuple(want_args)), \
+                f"call {self.used}: got {method}{shown}, expected {want}{tuple(want_args)}"
             self.used += 1
         if isinstance(result, BaseException):
             raise result
@@ -139,10 +140,12 @@ class FakeModule:
 
 def fake_gphoto2(script):
     camera = type("Camera", (Camera,), {"script": script})
-    return types.SimpleNamespace(**{k: v for k, v in vars(FakeModule).items() if not k.startswith("_")} | {"Camera": camera})
+    public = {k: v for k, v in vars(FakeModule).items() if not k.startswith("_")}
+    return types.SimpleNamespace(**public | {"Camera": camera})
 
 
-@pytest.mark.parametrize("standin", [GPhoto2Error, Widget, CameraList, Camera, FilePath, CameraFile, FakeModule], ids=lambda c: c.__name__)
+@pytest.mark.parametrize("standin", [GPhoto2Error, Widget, CameraList, Camera, FilePath, CameraFile, FakeModule],
+                         ids=lambda c: c.__name__)
 def test_standin_matches_python_gphoto2(standin):
     pytest.importorskip("gphoto2")
     assert check_standin(standin) == []
@@ -151,11 +154,13 @@ def test_standin_matches_python_gphoto2(standin):
 def opening(*, shutter="1/60", iso="200", target=True):
     """The exchanges of GPhoto2Camera(exposure=1/8, iso=200) on a camera with these settings."""
     steps = [("init", (), None)]
-    steps.append(("get_single_config", ("capturetarget",), Widget("Memory card", ["Internal RAM", "Memory card"]) if target else GPhoto2Error(-2)))
+    steps.append(("get_single_config", ("capturetarget",),
+                  Widget("Memory card", ["Internal RAM", "Memory card"]) if target else GPhoto2Error(-2)))
     if target:
         steps.append(("set_single_config", ("capturetarget", "Internal RAM"), None))
     steps += [
-        ("get_single_config", ("imageformat",), Widget("Large Fine JPEG", ["Large Fine JPEG", "RAW + Large Fine JPEG", "RAW"])),
+        ("get_single_config", ("imageformat",),
+         Widget("Large Fine JPEG", ["Large Fine JPEG", "RAW + Large Fine JPEG", "RAW"])),
         ("set_single_config", ("imageformat", "RAW"), None),
         ("get_single_config", ("iso",), Widget("Auto", ISOS)),
         ("set_single_config", ("iso", iso), None),
@@ -180,14 +185,16 @@ def test_capture_downloads_deletes_and_decodes_linearly(make_dng):
     mosaic = np.full((H, W), 64 + 1000, np.uint16)
     mosaic[0, 0] = 4000
     raw = make_dng(mosaic)
-    script = Script(opening() + shot("capt0000.dng", raw) + shot("capt0001.dng", raw, delete_result=GPhoto2Error(-6)) + [("exit", (), None)])
+    script = Script(opening() + shot("capt0000.dng", raw) + shot("capt0001.dng", raw, delete_result=GPhoto2Error(-6))
+                    + [("exit", (), None)])
     cam = GPhoto2Camera(exposure=0.1, iso=200, gp=fake_gphoto2(script))
     assert cam.exposure == 0.125 and cam.gain == 2.0  # nearest shutter 1/8 s; ISO 200 / base 100
     frame = cam.capture()
     np.testing.assert_allclose(frame.image[4:, 4:], 1000 / (4000 - 64) / (0.125 * 2.0), rtol=1e-4)
     assert frame.saturated[0, 0] and not frame.saturated[4:, 4:].any()
     assert frame.metadata["raw_name"] == "capt0000.dng" and cam.last_raw == raw
-    assert frame.metadata["settings"] == {"capture_target": "Internal RAM", "image_format": "RAW", "iso": "200", "exposure": "1/8"}
+    assert frame.metadata["settings"] == {"capture_target": "Internal RAM", "image_format": "RAW", "iso": "200",
+                                          "exposure": "1/8"}
     assert cam.resolution == (H, W) and cam.warnings == []
     cam.capture()  # the body refuses the delete: recorded, not fatal
     assert "deleting capt0001.dng from the camera failed" in cam.warnings[0]
@@ -213,7 +220,8 @@ def test_exposure_snaps_to_nearest_shutter_speed_and_reports_it():
     cam.exposure = 1 / 250  # no change, no exchange
     cam.exposure = 40.0
     assert cam.exposure == 30.0
-    with pytest.raises(InputError, match=r"exposure 0.001 s is outside the camera's shutter speeds \(1/250 .. 30 s\); valid choices: 1/250, 1/60"):
+    with pytest.raises(InputError, match=r"exposure 0.001 s is outside the camera's shutter speeds "
+                                         r"\(1/250 .. 30 s\); valid choices: 1/250, 1/60"):
         cam.exposure = 1e-3  # more than half a stop beyond the shortest: refused, nothing sent
     with pytest.raises(InputError, match="exposure"):
         cam.exposure = -1
@@ -271,7 +279,8 @@ def test_download_failure_still_deletes_the_shot():
     path = FilePath("/store", "IMG_1.CR2")
     script = Script(
         opening()
-        + [("capture", (0,), path), ("file_get", ("/store", "IMG_1.CR2", 1), GPhoto2Error(-7)), ("file_delete", ("/store", "IMG_1.CR2"), None), ("exit", (), None)]
+        + [("capture", (0,), path), ("file_get", ("/store", "IMG_1.CR2", 1), GPhoto2Error(-7)),
+           ("file_delete", ("/store", "IMG_1.CR2"), None), ("exit", (), None)]
     )
     cam = GPhoto2Camera(exposure=1 / 8, iso=200, gp=fake_gphoto2(script))
     with pytest.raises(DeviceError, match="downloading IMG_1.CR2 failed: input/output error"):
@@ -304,10 +313,12 @@ def test_a_hung_call_times_out_and_blocks_further_calls():
 
 
 def test_listing_and_probe():
-    script = Script([("autodetect", (), [("Nikon DSC D7100", "usb:001,004")]), ("autodetect", (), []), ("autodetect", (), GPhoto2Error(-7))])
+    script = Script([("autodetect", (), [("Nikon DSC D7100", "usb:001,004")]), ("autodetect", (), []),
+                     ("autodetect", (), GPhoto2Error(-7))])
     gp = fake_gphoto2(script)
     assert list_cameras(gp=gp) == [("Nikon DSC D7100", "usb:001,004")]
-    assert [str(a) for a in probe(gp=gp)] == ["gphoto2:: unavailable — no camera detected (connected by USB, switched on, not in mass-storage mode?)"]
+    assert [str(a) for a in probe(gp=gp)] == [
+        "gphoto2:: unavailable — no camera detected (connected by USB, switched on, not in mass-storage mode?)"]
     (entry,) = probe(gp=gp)
     assert not entry.ok and "input/output error" in entry.reason
     script.finished()
@@ -315,7 +326,8 @@ def test_listing_and_probe():
 
 def test_missing_library_is_a_plain_device_error(without_modules):
     without_modules("gphoto2")
-    with pytest.raises(DeviceError, match=r"python-gphoto2 is not installed; install the optional extra: pip install 'albedit\[gphoto2\]'"):
+    with pytest.raises(DeviceError, match=r"python-gphoto2 is not installed; "
+                                          r"install the optional extra: pip install 'albedit\[gphoto2\]'"):
         GPhoto2Camera()
     (entry,) = probe()
     assert not entry.ok and "not installed" in entry.reason
@@ -425,9 +437,11 @@ def test_clipped_pixels_are_completed_by_the_recorders_bracket_at_snapped_shutte
     script = Script(
         opening()
         + shot("capt0000.dng", dng(1 / 8))  # the right half clips at 1/8 s (16 * 0.25 = 4 > 1)
-        + [("get_single_config", ("shutterspeed",), Widget("1/8", SHUTTERS)), ("set_single_config", ("shutterspeed", "1/60"), None)]
+        + [("get_single_config", ("shutterspeed",), Widget("1/8", SHUTTERS)),
+           ("set_single_config", ("shutterspeed", "1/60"), None)]
         + shot("capt0001.dng", dng(1 / 60))  # 1/8 / 8 = 1/64 s snaps to 1/60 s
-        + [("get_single_config", ("shutterspeed",), Widget("1/60", SHUTTERS)), ("set_single_config", ("shutterspeed", "1/8"), None)]
+        + [("get_single_config", ("shutterspeed",), Widget("1/60", SHUTTERS)),
+           ("set_single_config", ("shutterspeed", "1/8"), None)]
         + [("exit", (), None)]
     )
     cam = GPhoto2Camera(exposure=1 / 8, iso=200, release_after=None, gp=fake_gphoto2(script))

@@ -42,7 +42,8 @@ class Script:
                 self.used, self.hits = self.used + 1, 0  # the repeated exchange is over
             assert self.used < len(self.steps), f"unexpected {name}{args}: script exhausted"
             want, want_args, result, *repeat = self.steps[self.used]
-            assert (name, args) == (want, tuple(want_args)), f"exchange {self.used}: got {name}{args}, expected {want}{tuple(want_args)}"
+            assert (name, args) == (want, tuple(want_args)), \
+                f"exchange {self.used}: got {name}{args}, expected {want}{tuple(want_args)}"
             if repeat:
                 self.hits += 1
             else:
@@ -175,7 +176,8 @@ class Harvester:
 
 @pytest.mark.parametrize(
     "standin",
-    [EnumNode, IntNode, FloatNode, Component, Payload, Buffer, RemoteDevice, ImageAcquirer, ParameterSet, ParameterKey, Harvester],
+    [EnumNode, IntNode, FloatNode, Component, Payload, Buffer, RemoteDevice, ImageAcquirer, ParameterSet, ParameterKey,
+     Harvester],
     ids=lambda c: c.__name__,
 )
 def test_standin_matches_harvesters(standin):
@@ -186,7 +188,8 @@ def test_standin_matches_harvesters(standin):
 def install(monkeypatch, script, nodes, devices_found=("cam0",)):
     """Put a fake ``harvesters.core`` in sys.modules: Harvester and ImageAcquirer call the script."""
     acquirer = type("ImageAcquirer", (ImageAcquirer,), {"script": script, "node_map": types.SimpleNamespace(**nodes)})
-    harvester = type("Harvester", (Harvester,), {"script": script, "acquirer": acquirer, "device_info_list": list(devices_found)})
+    harvester = type("Harvester", (Harvester,),
+                     {"script": script, "acquirer": acquirer, "device_info_list": list(devices_found)})
     core = types.ModuleType("harvesters.core")
     core.Harvester, core.ParameterSet, core.ParameterKey = harvester, ParameterSet, ParameterKey
     package = types.ModuleType("harvesters")
@@ -262,7 +265,8 @@ def test_capture_is_linear_with_black_level_exposure_and_gain(monkeypatch, cti):
 def test_no_frame_in_time_is_a_device_error_and_acquisition_stops(monkeypatch, cti):
     script = Script(
         opening(cti)[:6]
-        + [("start", (), None), ("try_fetch", (), None, REPEAT), ("stop", (), None), ("destroy", (), None), ("reset", (), None)]
+        + [("start", (), None), ("try_fetch", (), None, REPEAT), ("stop", (), None), ("destroy", (), None),
+           ("reset", (), None)]
     )
     install(monkeypatch, script, nodes_for(script))
     cam = open_camera(cti, serial="S1", timeout=0.3)
@@ -276,7 +280,8 @@ def test_no_frame_in_time_is_a_device_error_and_acquisition_stops(monkeypatch, c
 def test_bad_options_list_the_choices(monkeypatch, cti):
     script = Script(opening(cti)[:5] + [("destroy", (), None), ("reset", (), None)])
     install(monkeypatch, script, nodes_for(script))
-    with pytest.raises(InputError, match="pixel_format 'RGB8' is not offered by this camera; valid choices: Mono8, Mono12, BayerRG12"):
+    with pytest.raises(InputError, match="pixel_format 'RGB8' is not offered by this camera; "
+                                         "valid choices: Mono8, Mono12, BayerRG12"):
         open_camera(cti, serial="S1", pixel_format="RGB8")
     script.finished()
     script = Script(opening(cti)[:6] + [("destroy", (), None), ("reset", (), None)])

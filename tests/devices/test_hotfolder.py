@@ -196,7 +196,8 @@ def test_waits_go_through_the_paired_projectors_idle(tmp_path):
 def test_raw_files_keep_the_sensor_orientation_everywhere(tmp_path, make_dng):
     """A camera's orientation tag (here: rotated 90°) can change between shots of a fixed rig; its
     pixel grid cannot. Every reader decodes RAW files in the sensor's orientation."""
-    from engine.imageio import decode_raw, read_image
+    from engine.imageio import read_image
+    from engine.raw import decode_raw
 
     mosaic = np.full((H, W), 64 + 500, np.uint16)
     mosaic[:2, :] = 4000  # the top rows clip

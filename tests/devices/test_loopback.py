@@ -11,7 +11,7 @@ import pytest
 import devices
 from devices.loopback import linear_dng
 from engine.errors import DeviceError, InputError
-from engine.imageio import decode_raw
+from engine.raw import decode_raw
 
 
 def test_linear_dng_decodes_to_the_sensor_values_and_flags_clipping():

@@ -248,7 +248,8 @@ def test_a_camera_index_with_no_device_is_one_plain_line(capfd):
     index = 97
     if glob.glob(f"/dev/video{index}"):
         pytest.skip(f"/dev/video{index} exists here")
-    with pytest.raises(DeviceError, match=rf"^no camera at index {index} \(not attached, or in use by another program\)$"):
+    with pytest.raises(DeviceError,
+                       match=rf"^no camera at index {index} \(not attached, or in use by another program\)$"):
         open_camera(index)
     assert main(["devices", "--check", f"opencv:{index}"]) == 1
     err = capfd.readouterr().err.strip().splitlines()

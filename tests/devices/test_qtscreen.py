@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[2]
 def projector():
     events: list = []  # ("settle", seconds, serial painted when the settle wait began)
     holder = {}
-    proj = qtscreen.open_projector(0, settle=0.05, timeout=5.0, sleep=lambda s: events.append(("settle", s, holder["p"].window.painted)))
+    proj = qtscreen.open_projector(0, settle=0.05, timeout=5.0,
+                                   sleep=lambda s: events.append(("settle", s, holder["p"].window.painted)))
     holder["p"] = proj
     proj.sleeps = events
     yield proj
@@ -85,7 +86,8 @@ def test_worker_show_times_out_when_ui_thread_is_blocked():
     proj = qtscreen.open_projector(0, settle=0.0, timeout=0.2)
     try:
         errors = []
-        worker = threading.Thread(target=lambda: _capture_error(proj.show, np.zeros((*proj.resolution, 3), np.float32), errors))
+        black = np.zeros((*proj.resolution, 3), np.float32)
+        worker = threading.Thread(target=lambda: _capture_error(proj.show, black, errors))
         worker.start()
         worker.join(5.0)  # the UI thread does not run its event loop meanwhile
         assert not worker.is_alive()
@@ -152,7 +154,8 @@ def test_vanished_screen_raises(projector):
 
 def test_window_closed_by_the_user_is_a_typed_error_not_a_timeout(projector):
     projector.window.close()  # Alt+F4, or the window manager
-    with pytest.raises(DeviceError, match=r"the projector window on '.*' was closed \(by the user or the window manager\)"):
+    with pytest.raises(DeviceError,
+                       match=r"the projector window on '.*' was closed \(by the user or the window manager\)"):
         projector.show(np.zeros((*projector.resolution, 3), np.float32))
 
 
@@ -210,13 +213,16 @@ proj.close()
 def test_second_screen_selected_by_index_or_name(tmp_path, choice):
     cfg = {
         "screens": [
-            {"name": "DESK", "x": 0, "y": 0, "width": 640, "height": 480, "logicalDpi": 96, "logicalBaseDpi": 96, "dpr": 1},
-            {"name": "PROJ", "x": 640, "y": 0, "width": 320, "height": 200, "logicalDpi": 96, "logicalBaseDpi": 96, "dpr": 1},
+            {"name": "DESK", "x": 0, "y": 0, "width": 640, "height": 480,
+             "logicalDpi": 96, "logicalBaseDpi": 96, "dpr": 1},
+            {"name": "PROJ", "x": 640, "y": 0, "width": 320, "height": 200,
+             "logicalDpi": 96, "logicalBaseDpi": 96, "dpr": 1},
         ]
     }
     (tmp_path / "cfg.json").write_text(json.dumps(cfg))
     env = dict(os.environ, QT_QPA_PLATFORM=f"offscreen:configfile={tmp_path / 'cfg.json'}", PYTHONPATH=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", _CHILD, choice], env=env, cwd=ROOT, capture_output=True, text=True, timeout=60)
+    out = subprocess.run([sys.executable, "-c", _CHILD, choice], env=env, cwd=ROOT, capture_output=True, text=True,
+                         timeout=60)
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout.strip().splitlines()[-1])
     assert got["screens"] == [[0, "DESK", 640, 480], [1, "PROJ", 320, 200]]

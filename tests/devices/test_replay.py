@@ -75,7 +75,8 @@ def test_unknown_pattern_and_nothing_shown_are_device_errors(recording):
         rig.camera.capture()
     unknown = _pattern(7)
     rig.projector.show(unknown)
-    with pytest.raises(DeviceError, match=f"pattern {pattern_hash(unknown)} was never recorded: .*has no capture for it"):
+    with pytest.raises(DeviceError,
+                       match=f"pattern {pattern_hash(unknown)} was never recorded: .*has no capture for it"):
         rig.camera.capture()
     with pytest.raises(InputError, match=r"image must have shape \(3, 4, 3\)"):
         rig.projector.show(np.zeros((4, 3, 3), np.float32))
@@ -84,7 +85,8 @@ def test_unknown_pattern_and_nothing_shown_are_device_errors(recording):
 
 
 def test_repeated_patterns_are_served_in_order_and_exposure_selects(tmp_path):
-    session = Session.create(tmp_path / "s", rig_name="gphoto2", camera_resolution=CAMERA, projector_resolution=PROJECTOR)
+    session = Session.create(tmp_path / "s", rig_name="gphoto2", camera_resolution=CAMERA,
+                             projector_resolution=PROJECTOR)
     black = pattern_hash(np.zeros((*PROJECTOR, 3), np.float32))
     session.add_capture("dark-start", _image(0), pattern_id=black, meta={"exposure": 0.1})
     session.add_capture("dark-long", _image(1), pattern_id=black, meta={"exposure": 0.4})
@@ -95,7 +97,8 @@ def test_repeated_patterns_are_served_in_order_and_exposure_selects(tmp_path):
     served = [rig.camera.capture().metadata["replay"]["capture"] for _ in range(4)]
     assert served == ["dark-start", "dark-long", "dark-end", "dark-end"]
     rig.camera.exposure = 0.1
-    assert [rig.camera.capture().metadata["replay"]["capture"] for _ in range(3)] == ["dark-start", "dark-end", "dark-end"]
+    replayed = [rig.camera.capture().metadata["replay"]["capture"] for _ in range(3)]
+    assert replayed == ["dark-start", "dark-end", "dark-end"]
     rig.camera.exposure = 0.4
     np.testing.assert_array_equal(rig.camera.capture().image, _image(1))
     rig.camera.exposure = 0.2

@@ -39,7 +39,8 @@ def test_projector_light_is_seen_and_the_frame_is_linear_radiance_with_device(ri
     assert lit.mean() > 0.05, "the projector's light is not seen: check cabling, screen and focus"
     again = (rig.projector.show(_flat(rig, 0.0)), rig.camera.capture())[1]
     # black right after white: a stale (queued) frame or too short a settle time shows up here
-    np.testing.assert_allclose(again.image[lit].mean(), black.image[lit].mean(), rtol=0.1, atol=0.02 * white.image[lit].mean())
+    np.testing.assert_allclose(again.image[lit].mean(), black.image[lit].mean(), rtol=0.1,
+                               atol=0.02 * white.image[lit].mean())
 
 
 def test_radiance_does_not_depend_on_exposure_with_device(rig):

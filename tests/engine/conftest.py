@@ -145,5 +145,6 @@ def stand_in_calibration(rig):
 def exact_prepared(rig, mask=None):
     t = rig.target if mask is None else mask
     return PreparedTarget(
-        t.copy(), np.zeros_like(t), np.where(t[:, :, None], rig.direct, 0).astype(np.float32), Correspondence.identity((H, W))
+        t.copy(), np.zeros_like(t), np.where(t[:, :, None], rig.direct, 0).astype(np.float32),
+        Correspondence.identity((H, W))
     )

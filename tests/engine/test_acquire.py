@@ -80,7 +80,8 @@ def test_changed_plan_on_the_same_session_is_refused(tmp_path):
 def test_photograph_under_projector_flood_uses_a_black_reference():
     rig = PatchRig(ambient=False)  # the only light is the projector (paper Fig. 7-8)
     flood = np.full((H, W, 3), 0.8, np.float32)
-    acq = acquire_single(Recorder(rig), _calibration(rig), rig.target, 5, prepared=_prepared(rig), photograph_pattern=flood)
+    acq = acquire_single(Recorder(rig), _calibration(rig), rig.target, 5, prepared=_prepared(rig),
+                         photograph_pattern=flood)
     assert acq.images == 1 + 4 * 3 and rig.captures == acq.images + 1  # + the black reference
     d = decompose(acq.observations, acq.target.mask)
     truth = rig.truth(np.array([1.5, 0.5, 2.0]), projector_light=0.8**GAMMA)

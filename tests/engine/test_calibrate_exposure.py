@@ -91,7 +91,8 @@ def test_bad_inputs():
 def _full_scale_level(frame, model, percentile):
     """Where the frame's bright end sits, as a fraction of the virtual camera's clip level."""
     clip_electrons = min(model.full_well, (model.white_level - model.black_level) * model.electrons_per_dn)
-    return np.percentile(frame.image.max(axis=-1), percentile) * model.electrons_per_radiance * frame.exposure / clip_electrons
+    level = np.percentile(frame.image.max(axis=-1), percentile)
+    return level * model.electrons_per_radiance * frame.exposure / clip_electrons
 
 
 @pytest.mark.parametrize("start", [1e-5, 10.0])  # 12 stops under, 8 stops over
@@ -104,7 +105,7 @@ def test_auto_exposure_converges_on_the_virtual_camera(tmp_path_factory, start):
         rig.projector.show(np.ones(rig.projector.resolution + (3,), np.float32))
         rig.camera.exposure = start
         auto = AutoExposure(percentile=99.5, max_saturated=0.005)
-        for steps in range(1, 16):
+        for steps in range(1, 16):  # noqa: B007 (read after the loop)
             frame = rig.camera.capture()
             wanted = auto.step(frame.image, frame.saturated, exposure=frame.exposure)
             if wanted is None:

@@ -59,7 +59,8 @@ def test_cascade_beats_recoloring_each_target_separately():
     photo = rig.truth(1.0)
     naive = photo.copy()
     for mask, kap in pairs:
-        sub = acquire_cascade(Recorder(PatchRig(seed=1, targets=2)), stand_in_calibration(rig), [("x", mask)], 4, prepared=[exact_prepared(rig, mask)])
+        sub = acquire_cascade(Recorder(PatchRig(seed=1, targets=2)), stand_in_calibration(rig), [("x", mask)], 4,
+                              prepared=[exact_prepared(rig, mask)])
         dd = decompose(sub.acquisition.observations, mask)
         naive += recolor(dd, kap) - photo
     assert ours < 0.1 * _error(naive, truth)
@@ -73,7 +74,8 @@ def test_adaptive_never_costs_more_and_keeps_its_promise(policy):
     assert adaptive.images + adaptive.predicted == brute.images
     assert adaptive.images < brute.images
     # every prediction made under the "span" policy came with a bound below the threshold
-    assert all(e["bound"] < 0.01 for e in adaptive.log if e["source"] == "predicted" and "bound" in e) or policy == "linear"
+    assert (all(e["bound"] < 0.01 for e in adaptive.log if e["source"] == "predicted" and "bound" in e)
+            or policy == "linear")
     pairs = [(rig.targets[0], KAPPAS[0]), (rig.targets[1], KAPPAS[1]), (rig.targets[2], np.array([1.3, 0.7, 1.0]))]
     truth = rig.truth(None, pairs=pairs)
     out_b = recolor(decompose(brute.acquisition.observations, rig.targets[2]), (1.3, 0.7, 1.0))

@@ -17,6 +17,7 @@ from engine.colour import (
 )
 from engine.decompose import Decomposition
 from engine.errors import InputError
+from engine.figurate import transport_matrix
 
 
 @pytest.mark.parametrize("text", ["#3355cc", "#35c", "3355cc", "#3355CC"])
@@ -103,17 +104,44 @@ def test_direct_colour_white_balances_with_the_direct_image():
         direct_colour(d, direct=np.zeros((1, 2, 3)))
 
 
+def _measured(modes, order):
+    """A one-pixel target decomposed (exactly, Eq. 6) from the observations of an infinite series
+    of interactions ``S_n = Σ_j a_j λ_j^n`` per channel: ``obs[r] = Σ_j a_j / (1 − λ_j)^(r+1)``."""
+    obs = np.zeros((order, 1, 1, 3))
+    for c, channel in enumerate(modes):
+        for a, lam in channel:
+            obs[:, 0, 0, c] += a / (1 - lam) ** np.arange(1, order + 1)
+    inside = np.linalg.solve(transport_matrix(order), obs.reshape(order, -1)).reshape(obs.shape)
+    return Decomposition(inside, np.zeros((1, 1, 3)), np.ones((1, 1), bool))
+
+
+@pytest.mark.parametrize("order", [2, 3, 4, 6])
+def test_kappa_limit_is_the_series_growth_not_the_truncated_fits(order):
+    """One mode: exact at any order. Two modes: exact from order 4 (Prony), an overestimate of
+    the limit below. The ratio of the fit's last two components would be far off."""
+    single = _measured([[(1.0, 0.05)], [(1.0, 0.2)], [(1.0, 0.5)]], order)
+    np.testing.assert_allclose(kappa_limit(single), [20.0, 5.0, 2.0], rtol=1e-6)
+    two = _measured([[(1.0, 0.02), (0.3, 0.17)]] * 3, order)
+    limit = kappa_limit(two)
+    if order >= 4:
+        np.testing.assert_allclose(limit, 1 / 0.17, rtol=1e-6)
+    else:
+        assert np.all(limit > 1 / 0.17)
+    sums = two.components[:, 0, 0, 0]
+    if order >= 4:
+        assert sums[-2] / sums[-1] < 0.8 / 0.17  # what the last components alone would say
+
+
 def test_convergence_share_limit_and_advice():
     d = _geometric([0.05, 0.2, 0.5], 4)
-    np.testing.assert_allclose(kappa_limit(d), [20.0, 5.0, 2.0])
     ok = convergence(d, [1.0, 1.0, 0.2])
     assert ok.converged and ok.message() == ""
     slow = convergence(d, [1.0, 1.0, 1.0])
     # B: last term 0.5^3 of 1 + 0.5 + 0.25 + 0.125
     assert slow.share[2] == pytest.approx(0.125 / 1.875)
     assert not slow.converged and "higher order" in slow.message() and "in B" in slow.message()
-    diverging = convergence(d, [1.0, 6.0, 1.0])
-    assert diverging.ratio[1] == pytest.approx(1.2)
+    diverging = convergence(d, [1.0, 8.0, 1.0])
+    assert diverging.ratio[1] == pytest.approx(8.0 / kappa_limit(d)[1]) and diverging.ratio[1] > 1
     assert "diverges in G" in diverging.message() and "smaller change" in diverging.message()
 
 

@@ -79,7 +79,10 @@ def test_small_target_is_filtered_in_its_window_exactly_as_in_the_whole_image():
     sub = Decomposition(d.components, np.where(small[:, :, None], 0, d.unreached), small)
     out = denoise_components(sub, photo, radius=3)
     # the same target in a larger canvas of zeros (its window then sits inside the image)
-    pad = lambda a, axes: np.pad(a, [(0, 0)] * axes[0] + [(8, 8), (8, 8)] + [(0, 0)] * axes[1], mode="edge")
+    def pad(a, axes):
+        return np.pad(a, [(0, 0)] * axes[0] + [(8, 8), (8, 8)] + [(0, 0)] * axes[1], mode="edge")
+
     big = Decomposition(pad(sub.components, (1, 1)), pad(sub.unreached, (0, 1)), pad(small, (0, 0)))
     out_big = denoise_components(big, pad(photo, (0, 1)), radius=3)
-    np.testing.assert_allclose(out_big.components[:, 8:-8, 8:-8][:, small], out.components[:, small], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(out_big.components[:, 8:-8, 8:-8][:, small], out.components[:, small],
+                               rtol=1e-5, atol=1e-6)

@@ -9,20 +9,18 @@ import numpy as np
 import pytest
 import rawpy
 
-from engine import imageio
 from engine.errors import InputError
 from engine.imageio import (
     atomic_write,
-    decode_raw,
     image_info,
     read_image,
     read_metadata,
-    read_raw_bytes,
     srgb_decode,
     srgb_encode,
     to_display,
     write_image,
 )
+from engine.raw import decode_raw, raw_postprocess_options, read_raw_bytes
 from tests.standins import check_standin, stands_in_for
 
 
@@ -316,7 +314,7 @@ def test_dng_brightness_is_linear_across_frames():
     ratio = read_raw_bytes(bright).mean() / read_raw_bytes(dim).mean()
     assert ratio == pytest.approx(3.0, rel=1e-3)
     assert read_raw_bytes(bright).mean() == pytest.approx(0.9, abs=1e-3)
-    options = imageio.raw_postprocess_options()
+    options = raw_postprocess_options()
     options.pop("adjust_maximum_thr")
     import io
 

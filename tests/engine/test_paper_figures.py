@@ -80,7 +80,8 @@ def test_two_target_cascade_matches_truth_for_any_free_kappa(wedge, wedge_brute,
 def test_declaring_no_unreached_light_is_wrong_when_the_flood_lights_the_whole_scene(wedge, wedge_brute):
     truth = _wedge_truth(wedge, paper.KAPPA_RIGHT)
     with_light = paper.relative_error(recolor(paper._decomposed(wedge_brute), paper.KAPPA_RIGHT), truth)
-    without = paper.relative_error(recolor(paper._decomposed(wedge_brute, unreached_light=False), paper.KAPPA_RIGHT), truth)
+    without = paper.relative_error(
+        recolor(paper._decomposed(wedge_brute, unreached_light=False), paper.KAPPA_RIGHT), truth)
     assert without > 20 * with_light
 
 
@@ -89,15 +90,16 @@ def test_three_target_cascade_matches_truth(three, three_brute):
     assert three_brute.images == ORDER**3 and three_brute.predicted == 0
     assert three_brute.fixed_kappa == [list(k) for k in paper.KAPPA_THREE[:2]]
     names = ["red", "blue", "beige"]
-    truth = three.truth(list(zip(names, paper.KAPPA_THREE)))
+    truth = three.truth(list(zip(names, paper.KAPPA_THREE, strict=True)))
     ours = paper.relative_error(recolor(paper._decomposed(three_brute), paper.KAPPA_THREE[2]), truth)
     naive = paper.relative_error(
-        paper.naive_per_pixel(three.capture_photograph(), [(three.mask(n), k) for n, k in zip(names, paper.KAPPA_THREE)]),
+        paper.naive_per_pixel(three.capture_photograph(),
+                              [(three.mask(n), k) for n, k in zip(names, paper.KAPPA_THREE, strict=True)]),
         truth)
     assert ours < 6e-3, ours  # measured 0.20 %
     assert ours < naive / 10  # naive measured 8.7 %
     # the last target's "photograph" is the scene with the first two already recolored (Algorithm 1)
-    first_two = three.truth(list(zip(names[:2], paper.KAPPA_THREE[:2])))
+    first_two = three.truth(list(zip(names[:2], paper.KAPPA_THREE[:2], strict=True)))
     assert paper.relative_error(three_brute.acquisition.observations[0], first_two) < 6e-3
 
 
@@ -112,7 +114,7 @@ def test_adaptive_capture_never_exceeds_brute_force_and_keeps_its_error(request,
         truth = _wedge_truth(bench, free)
     else:
         names, fixed, free = ["red", "blue", "beige"], list(paper.KAPPA_THREE[:2]), paper.KAPPA_THREE[2]
-        truth = bench.truth(list(zip(names, paper.KAPPA_THREE)))
+        truth = bench.truth(list(zip(names, paper.KAPPA_THREE, strict=True)))
     result = bench.acquire(names, ORDER, fixed_kappa=fixed, adaptive=Adaptive(policy, threshold))
     assert result.images + result.predicted == brute.images  # every observation captured or predicted
     assert result.predicted > 0 and result.images < brute.images

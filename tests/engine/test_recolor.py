@@ -49,7 +49,8 @@ def test_kappa_zero_leaves_only_unreached_light(stack):
 def test_preview_is_the_area_average_of_the_full_recolor():
     rng = np.random.default_rng(3)
     k, h, w = 4, 97, 130
-    d = Decomposition(rng.random((k, h, w, 3), dtype=np.float32), rng.random((h, w, 3), dtype=np.float32), rng.random((h, w)) > 0.3)
+    d = Decomposition(rng.random((k, h, w, 3), dtype=np.float32), rng.random((h, w, 3), dtype=np.float32),
+                      rng.random((h, w)) > 0.3)
     kappa = np.array([0.5, 1.5, 3.0])
     pack = prepare_preview(d, (40, 40))
     small = recolor_preview(pack, kappa)

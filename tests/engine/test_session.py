@@ -41,10 +41,12 @@ def recorded(tmp_path) -> Path:
     """A session with two captures, a mask, state and calibration."""
     session = _new(tmp_path / "s")
     for i in range(2):
-        session.add_capture(f"c{i}", _capture(i), pattern_id=pattern_hash(_pattern(i)), meta={"exposure": 0.01 * (i + 1)})
+        session.add_capture(f"c{i}", _capture(i), pattern_id=pattern_hash(_pattern(i)),
+                            meta={"exposure": 0.01 * (i + 1)})
     session.write_mask("wall", np.eye(*CAMERA, dtype=bool))
     session.update(order=3, kappa={"wall": [1.0, 0.5, 0.5]})
-    session.write_calibration({"reference": "lab-2024"}, {"rig": {"direct": np.ones(CAMERA, np.float32), "lut": np.arange(4.0)}})
+    session.write_calibration({"reference": "lab-2024"},
+                              {"rig": {"direct": np.ones(CAMERA, np.float32), "lut": np.arange(4.0)}})
     return tmp_path / "s"
 
 
@@ -291,9 +293,11 @@ def _set_capture_file(rel):
     ("damage", "match"),
     [
         (lambda r: (r / "manifest.json").unlink(), "is not a session: manifest.json is missing"),
-        (lambda r: (r / "manifest.json").write_text('{"format": "albedit-session", "schema'), "corrupt \\(not valid JSON\\)"),
+        (lambda r: (r / "manifest.json").write_text('{"format": "albedit-session", "schema'),
+         "corrupt \\(not valid JSON\\)"),
         (lambda r: (r / "manifest.json").write_bytes(b"\xff\xfe\x00"), "corrupt \\(not valid JSON\\)"),
-        (lambda r: _edit_manifest(r, lambda m: m.update(schema_version=2)), "schema_version 2, newer than this Albedit reads"),
+        (lambda r: _edit_manifest(r, lambda m: m.update(schema_version=2)),
+         "schema_version 2, newer than this Albedit reads"),
         (lambda r: _edit_manifest(r, lambda m: m.update(schema_version=0)), "unknown schema_version 0"),
         (lambda r: _edit_manifest(r, lambda m: m.update(schema_version="1")), "schema_version must be an integer"),
         (lambda r: _edit_manifest(r, lambda m: m.pop("format")), "not an Albedit session manifest"),
@@ -307,7 +311,8 @@ def _set_capture_file(rel):
         (_set_capture_file("captures/../../elsewhere.exr"), r"leads outside the session folder \('\.\.'\)"),
         (_symlink_capture_outside, r"capture 'c1'.*leads outside the session folder \(symlink"),
         (_symlink_manifest_outside, "the manifest: path 'manifest.json' leads outside"),
-        (lambda r: _edit_manifest(r, lambda m: m["masks"]["wall"].update(file="../m.png")), "mask 'wall'.*leads outside"),
+        (lambda r: _edit_manifest(r, lambda m: m["masks"]["wall"].update(file="../m.png")),
+         "mask 'wall'.*leads outside"),
         (
             lambda r: _edit_manifest(r, lambda m: m["calibration"]["arrays"]["rig/lut"].update(file="/tmp/lut.npy")),
             "calibration array 'rig/lut'.*absolute",

@@ -170,7 +170,8 @@ def test_a_decomposition_round_trips_through_plain_arrays():
     ("change", "match"),
     [
         (lambda a: a.pop("components"), r"lack \['components'\]"),
-        (lambda a: a.update(components=a["components"][:, :2]), r"unreached must be a float array of shape \(2, 5, 3\)"),
+        (lambda a: a.update(components=a["components"][:, :2]),
+         r"unreached must be a float array of shape \(2, 5, 3\)"),
         (lambda a: a.update(target=a["target"].astype(np.uint8)), "target must be a bool array"),
         (lambda a: a.update(components=np.full_like(a["components"], np.nan)), "non-finite"),
         (lambda a: a.update(constraint=np.frombuffer(b"sideways".ljust(16), np.uint8)), "constraint must be one of"),

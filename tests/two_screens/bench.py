@@ -14,7 +14,8 @@ def add_rig_options(monkeypatch, cache) -> dict:
     """Options the command line cannot give, added to ``devices.open_rig`` per backend: the shared
     set-up cache, and the virtual rig's projector at the bench projector's resolution and its
     pixels point-sampled like the bench camera's."""
-    extra = {"loopback": {"cache_dir": cache}, "virtual": {"cache_dir": cache, "projector_resolution": PROJECTOR, "supersample": 1}}
+    extra = {"loopback": {"cache_dir": cache},
+             "virtual": {"cache_dir": cache, "projector_resolution": PROJECTOR, "supersample": 1}}
     real = devices.open_rig
     def open_rig(name, **options):
         return real(name, **options, **extra.get(name.partition(":")[0], {}))

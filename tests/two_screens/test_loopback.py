@@ -44,7 +44,8 @@ def test_each_file_format_carries_the_sensors_values(cache, file_format, toleran
         rig.projector.show(pattern)
         frame = rig.camera.capture()
     scene = f"virtual:{SCENE}"
-    with devices.open_rig(scene, resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1, cache_dir=cache) as virtual:
+    with devices.open_rig(scene, resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1,
+                          cache_dir=cache) as virtual:
         virtual.camera.model, virtual.camera.exposure = loopback._sensor(virtual)
         virtual.projector.show(pattern)
         direct = virtual.camera.capture()
@@ -71,7 +72,8 @@ def runs(tmp_path_factory, cache):
             out[rig.partition(":")[0]] = (cal, cap, Session.open(session))
     finally:
         mp.undo()
-    with real(f"virtual:{SCENE}", resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1, cache_dir=cache) as virtual:
+    with real(f"virtual:{SCENE}", resolution=CAMERA, projector_resolution=PROJECTOR, supersample=1,
+              cache_dir=cache) as virtual:
         mask = virtual.targets[TARGET]
         out["truth"] = virtual.truth.recolor([(mask, KAPPA)])
         out["correspondence"] = virtual.truth.correspondence()

@@ -13,7 +13,8 @@ from engine.imageio import read_image, read_metadata
 
 
 def _run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "app.main", *args], capture_output=True, text=True, cwd=cwd, timeout=600)
+    return subprocess.run([sys.executable, "-m", "app.main", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
@@ -82,7 +83,8 @@ def test_bad_input_gives_one_line_errors_and_nonzero_exit(tmp_path, args, messag
 def test_a_calibration_is_reused_across_sessions_of_the_same_rig_only(tmp_path):
     rig = ["--rig", "virtual:cornell", "--ideal", "--resolution", "24"]
     assert _run("calibrate", str(tmp_path / "cal"), *rig).returncode == 0
-    reused = _run("capture", str(tmp_path / "s2"), *rig, "--calibration", str(tmp_path / "cal"), "--target", "right_wall", "--order", "2")
+    reused = _run("capture", str(tmp_path / "s2"), *rig, "--calibration", str(tmp_path / "cal"),
+                  "--target", "right_wall", "--order", "2")
     assert reused.returncode == 0, reused.stderr
     other = _run("capture", str(tmp_path / "s3"), "--rig", "virtual:cornell", "--ideal", "--resolution", "32",
                  "--calibration", str(tmp_path / "cal"), "--target", "right_wall", "--order", "2")

@@ -172,10 +172,9 @@ def test_history_drops_redo_tail_and_unreachable_clean_state():
 
 def test_model_painting_and_rendering_never_import_qt():
     """The editing model, painting, rendering and files are Qt-free (STYLE.md: model/view split)."""
+    import pkgutil
     import subprocess
     import sys
-
-    import pkgutil
 
     import app.model
 
@@ -197,7 +196,8 @@ def test_noise_reduction_swaps_the_decomposition_and_back(acquired_doc, syntheti
     with pytest.raises(InputError, match=">= 0"):
         doc.set_noise_reduction(-1)
     with pytest.raises(InputError, match="does not match"):
-        doc.set_noise_reduction(3, type(measured)(measured.components[:, :4], measured.unreached[:4], measured.target[:4]))
+        cropped = type(measured)(measured.components[:, :4], measured.unreached[:4], measured.target[:4])
+        doc.set_noise_reduction(3, cropped)
     filtered = denoise_components(measured, doc.photograph, radius=3)
     seen = []
     doc.events.acquisition.connect(lambda: seen.append(doc.acquisition and doc.acquisition.denoise))

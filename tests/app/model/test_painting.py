@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 import pytest
 
@@ -61,7 +63,7 @@ def test_brush_drag_paints_the_swept_capsules(doc, size):
     pts = [(5.2, 5.7), (20.4, 8.1), (33.0, 30.5)]
     _drag(p, pts)
     expected = np.zeros((H, W), bool)
-    for a, b in zip(pts[:-1], pts[1:]):
+    for a, b in pairwise(pts):
         expected |= _capsule_reference(a, b, size / 2)
     np.testing.assert_array_equal(doc.target(doc.current).mask, expected)
 

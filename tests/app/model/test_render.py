@@ -9,12 +9,12 @@ from app.model import views
 from app.model.display import MAGNITUDE_MAP, false_colour, recolor_rgb32, rgb32_to_rgb, robust_max, to_rgb32
 from app.model.render import MaskSnapshot, Request, ViewRenderer, component_grid, preview_factor
 from app.model.views import VIEWS, CanvasView
-
-DETAIL_VIEWS = {spec.view for spec in VIEWS if spec.detail}
 from engine.errors import InputError
 from engine.imageio import to_display
 from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
 from tests.app.conftest import FakeTruth, make_decomposition
+
+DETAIL_VIEWS = {spec.view for spec in VIEWS if spec.detail}
 
 
 @pytest.mark.parametrize("exposure", [0.0, 1.5, -2.25])

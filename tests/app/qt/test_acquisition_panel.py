@@ -57,7 +57,8 @@ def dialogs(monkeypatch):
     """Every QMessageBox the panel opens, recorded instead of shown (a modal box hangs CI)."""
     shown = []
     for kind in ("warning", "critical", "information"):
-        monkeypatch.setattr(QMessageBox, kind, lambda *args, _k=kind: shown.append((_k, *args[1:])) or QMessageBox.StandardButton.Ok)
+        monkeypatch.setattr(QMessageBox, kind,
+                            lambda *args, _k=kind: shown.append((_k, *args[1:])) or QMessageBox.StandardButton.Ok)
     return shown
 
 
@@ -86,7 +87,8 @@ def _expected_captures(order: int, targets: int = 1) -> int:
 
 
 def _acq(session) -> dict[str, str]:
-    return {c.name: (c.sha256, c.time, c.index) for c in Session.open(session.path).captures if c.name.startswith("acq-")}
+    return {c.name: (c.sha256, c.time, c.index)
+            for c in Session.open(session.path).captures if c.name.startswith("acq-")}
 
 
 def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_panel, qtbot, dialogs, monkeypatch):

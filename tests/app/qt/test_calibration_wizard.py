@@ -288,14 +288,16 @@ def test_auto_exposure_and_identify_on_the_exposure_page(make_wizard, qtbot):
     qtbot.waitUntil(lambda: page.auto is None, timeout=TIMEOUT_MS)
     assert "settled" in page.report.text() and page.auto_button.isEnabled() and page.level.currentIndex() == 0
     assert page.controller.frames <= 3  # the frames say where the camera clips: one jump, then settled
-    qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3), timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: np.isclose(rig.camera.exposure * 1000, page.exposure.value(), rtol=1e-3),
+                    timeout=TIMEOUT_MS)
     white = rig.camera.capture()
     rig.projector.show(np.zeros(rig.projector.resolution + (3,), np.float32))
     lit = projector_lit(white.image, rig.camera.capture().image)
     assert white.saturated[lit].mean() <= 0.005 and lit.mean() > 0.8
     # the bright end of the projector-lit pixels sits near 0.8 of full scale; the lamp may clip
     m = rig.camera.model
-    clip = min(m.full_well, (m.white_level - m.black_level) * m.electrons_per_dn) / (m.electrons_per_radiance * white.exposure)
+    clip_electrons = min(m.full_well, (m.white_level - m.black_level) * m.electrons_per_dn)
+    clip = clip_electrons / (m.electrons_per_radiance * white.exposure)
     assert 0.8 / 1.26 <= np.percentile(white.image.max(axis=-1)[lit], 99.5) / clip <= 0.8 * 1.26
     assert white.saturated[~lit].any()  # the lamp is not projector light: it may clip
 

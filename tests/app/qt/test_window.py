@@ -149,12 +149,13 @@ def test_save_and_reopen_restores_the_edit(make_window, acquired_doc, tmp_path):
     doc, session, warnings = files.open_document(tmp_path / "s")
     assert warnings == [] and not doc.is_dirty() and isinstance(session, Session)
     assert [t.name for t in doc.targets] == ["floor", "wall", "later"]
-    for a, b in zip(doc.targets, acquired_doc.targets):
+    for a, b in zip(doc.targets, acquired_doc.targets, strict=True):
         np.testing.assert_array_equal(a.mask, b.mask)
         np.testing.assert_array_equal(a.kappa, b.kappa)
     np.testing.assert_array_equal(doc.photograph, acquired_doc.photograph)
     assert [doc.target(u).name for u in doc.acquisition.cascade] == ["floor", "wall"]
-    np.testing.assert_array_equal(recolor(doc.decomposition, doc.recolor_kappa()), recolor(acquired_doc.decomposition, [2, 0.125, 8]))
+    np.testing.assert_array_equal(recolor(doc.decomposition, doc.recolor_kappa()),
+                                  recolor(acquired_doc.decomposition, [2, 0.125, 8]))
     assert doc.kappa_lock(doc.by_name("floor").uid)
     # save again into the same session, then reopen in the window through recent files
     acquired_doc.rename_target(extra.uid, "renamed")
@@ -222,7 +223,8 @@ def test_real_unsaved_prompt_offers_save_discard_cancel(make_window, acquired_do
 
     def answer():
         box = QApplication.activeModalWidget()
-        seen["buttons"] = sorted(box.button(b).text().replace("&", "") for b in (Button.Save, Button.Discard, Button.Cancel))
+        seen["buttons"] = sorted(box.button(b).text().replace("&", "")
+                                 for b in (Button.Save, Button.Discard, Button.Cancel))
         box.button(Button.Cancel).click()
 
     QTimer.singleShot(50, answer)

@@ -158,5 +158,9 @@ class User:
             self.qtbot.mouseMove(canvas, p)
         self.qtbot.mouseRelease(canvas, button, modifiers, pts[-1])
 
+    def click_on_canvas(self, canvas, x: float, y: float, *, button=Qt.MouseButton.LeftButton) -> None:
+        """Click at camera pixel coordinates (x, y) (the eyedropper, a polygon vertex)."""
+        self.qtbot.mouseClick(canvas, button, pos=self.canvas_point(canvas, x, y))
+
     def wait_until(self, condition, timeout_ms: int = TIMEOUT_MS) -> None:
         self.qtbot.waitUntil(condition, timeout=timeout_ms)
