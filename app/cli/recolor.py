@@ -170,8 +170,8 @@ def run(args) -> int:
     print(f"wrote {args.output}", file=sys.stderr)
     d = doc.acquisition.decomposition
     if d.covariance is not None:  # the camera noise κ^(i+1) amplifies, on the target
-        sigma = float(np.sqrt(recolor_variance(d, args.kappa))[d.target].mean())
-        value = float(np.abs(recolor(d, args.kappa)[d.target]).mean())
+        sigma = float(np.sqrt(recolor_variance(d, new))[d.target].mean())
+        value = float(np.abs(recolor(d, new)[d.target]).mean())
         print(f"predicted σ on the target: {sigma:.4g} (mean), {sigma / max(value, 1e-30):.1%} of its mean value",
               file=sys.stderr)
     try:
