@@ -14,8 +14,9 @@ import numpy as np
 from engine.checks import check_choice, check_float_image, check_kappa, check_mask, check_order, float_dtype
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER, outside_matrix, transport_matrix
+from engine.noise import packed_index
 from engine.progress import Progress, ShouldStop, checkpoint, report
-from engine.solve import ConeSolver, Constraint, cone_basis, solve_systems
+from engine.solve import ConeSolver, Constraint, cone_basis, solve_systems, solve_weighted
 
 #: Pixels per tile: bounds the solver's working memory (~K·C·4·4 bytes per pixel).
 TILE_PIXELS = 1 << 18
@@ -43,6 +44,12 @@ class Decomposition:
     residual : (H, W) float32
         Relative fit residual ``‖A x − b‖ / ‖b‖`` per pixel over all channels; zero where
         the observations satisfy the constraints exactly.
+    covariance : (K(K+1)/2, H, W, C) float32 or None
+        Packed covariance (:func:`engine.noise.unpack_covariance`) of each pixel-channel's
+        unknowns, in the solver's order: on the target ``R^0 L_d … R^{K-1} L_d``; off it
+        ``L̄_d, C R^0 L_d … C R^{K-2} L_d`` (``C R^0 … C R^{K-1}`` without unreached light).
+        None when the observations' noise was not given. Standard deviations:
+        :meth:`standard_deviation`.
     """
 
     components: np.ndarray
@@ -51,6 +58,7 @@ class Decomposition:
     constraint: str = Constraint.ORDERED.value
     unreached_light: bool = True
     residual: np.ndarray | None = None
+    covariance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         comps, unreached, target = self.components, self.unreached, self.target
@@ -76,7 +84,7 @@ class Decomposition:
         Returns
         -------
         dict
-            ``components``, ``unreached``, ``target``, ``residual`` (when there is one),
+            ``components``, ``unreached``, ``target``, ``residual`` and ``covariance`` (when there are),
             ``flags`` ``(1,) bool`` (``unreached_light``) and ``constraint`` ``(16,) uint8``
             (the mode's name, space-padded). :meth:`from_arrays` reads it back.
 
@@ -97,6 +105,8 @@ class Decomposition:
         }
         if self.residual is not None:
             arrays["residual"] = self.residual
+        if self.covariance is not None:
+            arrays["covariance"] = self.covariance
         return arrays
 
     @classmethod
@@ -119,9 +129,16 @@ class Decomposition:
         except UnicodeDecodeError:
             raise InputError("the arrays' constraint is not a mode name; not a decomposition") from None
         d = cls(np.asarray(arrays["components"]), np.asarray(arrays["unreached"]), np.asarray(arrays["target"]),
-                constraint, bool(flags[0]), None if "residual" not in arrays else np.asarray(arrays["residual"]))
+                constraint, bool(flags[0]), None if "residual" not in arrays else np.asarray(arrays["residual"]),
+                None if "covariance" not in arrays else np.asarray(arrays["covariance"]))
         check_float_image("components", d.components, ndim=4)
         check_float_image("unreached", d.unreached, ndim=3)
+        if d.covariance is not None:
+            k = d.order
+            check_float_image("covariance", d.covariance, ndim=4)
+            if d.covariance.shape != (k * (k + 1) // 2,) + d.shape:
+                raise InputError(f"the arrays' covariance has shape {d.covariance.shape}, not "
+                                 f"{(k * (k + 1) // 2,) + d.shape}; not a decomposition")
         return d
 
     @property
@@ -157,8 +174,39 @@ class Decomposition:
         """
         rows, cols = slice(y0, y1), slice(x0, x1)
         residual = None if self.residual is None else self.residual[rows, cols]
+        cov = None if self.covariance is None else self.covariance[:, rows, cols]
         return Decomposition(self.components[:, rows, cols], self.unreached[rows, cols], self.target[rows, cols],
-                             self.constraint, self.unreached_light, residual)
+                             self.constraint, self.unreached_light, residual, cov)
+
+    def standard_deviation(self) -> tuple[np.ndarray, np.ndarray]:
+        """Standard deviation of every component and of the unreached light.
+
+        Returns
+        -------
+        components : (K, H, W, C) float32
+            Laid out like :attr:`components` (inside ``R^i L_d``, outside ``C R^i L_d``).
+        unreached : (H, W, C) float32
+            Of ``L̄_d`` (zero on the target and without unreached light).
+
+        Raises
+        ------
+        InputError
+            The decomposition carries no covariance (decomposed without the noise).
+        """
+        if self.covariance is None:
+            raise InputError("this decomposition carries no covariance: decompose with covariance= "
+                             "(the acquisition's Acquisition.covariance) to get standard deviations")
+        k = self.order
+        var = np.stack([self.covariance[packed_index(i, i, k)] for i in range(k)])
+        inside = self.target[None, :, :, None]
+        comps = np.where(inside, var, 0)
+        unreached = np.zeros(self.shape, np.float32)
+        if self.unreached_light:
+            comps[: k - 1] += np.where(inside[0], 0, var[1:])
+            unreached = np.where(inside[0], 0, var[0])
+        else:
+            comps += np.where(inside, 0, var)
+        return np.sqrt(comps).astype(np.float32), np.sqrt(unreached).astype(np.float32)
 
     @classmethod
     def from_components(cls, inside, outside, unreached, target, *, constraint: str = "none") -> Decomposition:
@@ -202,6 +250,7 @@ def decompose(
     *,
     constraint: str = "ordered",
     unreached_light: bool = True,
+    covariance=None,
     progress: Progress | None = None,
     should_stop: ShouldStop | None = None,
 ) -> Decomposition:
@@ -219,6 +268,11 @@ def decompose(
     unreached_light : bool
         False declares projector-only lighting (``L̄_d = 0``), which frees one more outside
         component (K instead of K-1).
+    covariance : (K(K+1)/2, H, W, C) float, optional
+        The observations' noise covariance per pixel and channel, packed
+        (:attr:`engine.acquire.Acquisition.covariance`). Given, each pixel-channel is solved
+        by generalised least squares weighted by its inverse and the result carries the
+        covariance of its components (:attr:`Decomposition.covariance`).
     progress, should_stop
         Progress callback ``(step, total, message)`` and cooperative cancellation; see
         :mod:`engine.progress`. Checked between tiles.
@@ -240,6 +294,13 @@ def decompose(
     Inside the target each pixel-channel solves Eq. 6, ``obs[r] = Σ_n binom(n+r, r) R^n L_d``;
     outside it Eq. 9 with the extra unknown ``L̄_d`` present only in ``obs[0]``. Work is done
     in tiles of rows, so memory beyond the result stays bounded.
+
+    With ``covariance`` the constrained problem is ``min (A x − b)ᵀ Σ⁻¹ (A x − b)``: the
+    system is square, so where no constraint is active the estimate is the unweighted one,
+    and Σ decides which way the ordering constraint moves the others where one is (a large
+    noisy high-order observation no longer drags the well-measured components). The
+    components' covariance is ``P_F (G_Fᵀ Σ⁻¹ G_F)⁻¹ P_Fᵀ`` for the active set F
+    (``bench/solve.py`` measures the weighted solver beside the unweighted one).
 
     Examples
     --------
@@ -270,18 +331,26 @@ def decompose(
         cone_basis(k, constraint, leading_free=unreached_light),
     )
     dtype = obs.dtype
+    cov_in = None
+    if covariance is not None:
+        cov_in = check_float_image("covariance", covariance, ndim=4)
+        if cov_in.shape != (k * (k + 1) // 2, h, w, c):
+            raise InputError(f"covariance must have shape {(k * (k + 1) // 2, h, w, c)} (packed K(K+1)/2 planes "
+                             f"per pixel-channel of the {k} observations), got {cov_in.shape}")
     components = np.zeros((k, h, w, c), dtype)
     unreached = np.zeros((h, w, c), dtype)
     residual = np.zeros((h, w), np.float32)
+    cov_out = None if cov_in is None else np.zeros((k * (k + 1) // 2, h, w, c), np.float32)
     rows = max(1, TILE_PIXELS // w)
     tiles = range(0, h, rows)
     for step, y0 in enumerate(tiles):
         checkpoint(should_stop, "decomposition")
         report(progress, step, len(tiles), "decomposing")
         y1 = min(h, y0 + rows)
-        _decompose_tile(obs, target, components, unreached, residual, (y0, y1), inside_solver, outside_solver, unreached_light)
+        _decompose_tile(obs, target, components, unreached, residual, (y0, y1), inside_solver, outside_solver,
+                        unreached_light, cov_in, cov_out)
     report(progress, len(tiles), len(tiles), "decomposed")
-    return Decomposition(components, unreached, target.copy(), constraint, unreached_light, residual)
+    return Decomposition(components, unreached, target.copy(), constraint, unreached_light, residual, cov_out)
 
 
 def observe(decomposition: Decomposition, *, kappa=None, order: int | None = None) -> np.ndarray:
@@ -342,7 +411,8 @@ def _check_observations(observations) -> np.ndarray:
     return obs.astype(float_dtype(obs), copy=False)
 
 
-def _decompose_tile(obs, target, components, unreached, residual, rows, inside_solver, outside_solver, unreached_light):
+def _decompose_tile(obs, target, components, unreached, residual, rows, inside_solver, outside_solver, unreached_light,
+                    cov_in=None, cov_out=None):
     y0, y1 = rows
     k, _, w, c = obs.shape
     b = obs[:, y0:y1].reshape(k, -1)
@@ -351,15 +421,19 @@ def _decompose_tile(obs, target, components, unreached, residual, rows, inside_s
     # outside unknowns are (L̄_d, C R^0 L_d, ...): L̄_d goes to `unreached` (row index k)
     outside_rows = np.concatenate([[k], np.arange(k - 1)]) if unreached_light else inside_rows
     res_num = np.zeros(b.shape[1], np.float64)
-    solve_systems(
-        b,
-        selector,
-        [inside_solver, outside_solver],
-        [inside_rows, outside_rows],
-        components[:, y0:y1].reshape(k, -1),
-        unreached[y0:y1].reshape(-1),
-        res_num,
-    )
+    if cov_in is None:
+        solve_systems(b, selector, [inside_solver, outside_solver], [inside_rows, outside_rows],
+                      components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1), res_num)
+    else:
+        packed = cov_out[:, y0:y1].reshape(cov_out.shape[0], -1)
+        out, extra = components[:, y0:y1].reshape(k, -1), unreached[y0:y1].reshape(-1)
+        warm = inside_solver.basis is not None
+        if warm:  # the unweighted optimum: a start that usually already has the weighted active set
+            solve_systems(b, selector, [inside_solver, outside_solver], [inside_rows, outside_rows], out, extra,
+                          res_num)
+        solve_weighted(b, cov_in[:, y0:y1].reshape(cov_in.shape[0], -1), selector, [inside_solver, outside_solver],
+                       [inside_rows, outside_rows], out, extra, packed, res_num, warm=warm)
+        cov_out[:, y0:y1] = packed.reshape(cov_out[:, y0:y1].shape)
     res_den = np.einsum("ij,ij->j", b, b, dtype=np.float64)
     num = res_num.reshape(-1, c).sum(axis=1)
     den = res_den.reshape(-1, c).sum(axis=1)

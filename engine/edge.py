@@ -292,4 +292,5 @@ def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Dec
         decomposition.constraint,
         decomposition.unreached_light,
         residual,
+        decomposition.covariance,  # an edge pixel keeps its unknowns' variance: its light is only re-divided
     ), blended

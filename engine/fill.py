@@ -40,7 +40,8 @@ def fill_unreachable(decomposition: Decomposition, painted, photograph, *, radiu
     decomposition : Decomposition
         ``target`` grown by the filled pixels, where the components are
         ``photograph × (mean share of the reachable neighbours)`` (shares renormalised to sum
-        to 1) and the unreached light is zero; elsewhere unchanged.
+        to 1) and the unreached light is zero; elsewhere unchanged. A covariance is filled
+        the same way: ``photograph² × (mean of the neighbours' covariance / photograph²)``.
     filled : (H, W) bool
         The pixels filled.
 
@@ -105,6 +106,16 @@ def fill_unreachable(decomposition: Decomposition, painted, photograph, *, radiu
     if residual is not None:
         residual = residual.copy()
         residual[fy, fx] = 0
+    covariance = decomposition.covariance
+    if covariance is not None:
+        # a hole is inside the target now: its unknowns are R^i L_d, the neighbours' order
+        covariance = covariance.copy()
+        safe2 = np.square(safe)
+        count = count[vy, vx][:, None]
+        for p in range(covariance.shape[0]):
+            ratio = np.where(valid[:, :, None], decomposition.covariance[p, rows, cols] / safe2, 0).astype(np.float32)
+            mean = cv2.boxFilter(ratio, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)[vy, vx] / count
+            covariance[p, fy, fx] = (np.square(light[vy, vx]) * mean).astype(covariance.dtype)
     result = Decomposition(components, unreached, reach | filled, decomposition.constraint,
-                           decomposition.unreached_light, residual)
+                           decomposition.unreached_light, residual, covariance)
     return result, filled

@@ -18,6 +18,7 @@ import numpy as np
 from engine.checks import check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
+from engine.noise import packed_index
 
 #: Elements per Horner tile: small enough for the accumulator to stay in cache.
 _TILE = 3 * (1 << 15)
@@ -90,6 +91,52 @@ def recolor(decomposition: Decomposition, kappa) -> np.ndarray:
     return out.reshape(h, w, c)
 
 
+def recolor_variance(decomposition: Decomposition, kappa) -> np.ndarray:
+    """Variance of :func:`recolor`'s result, from the decomposition's covariance.
+
+    Parameters
+    ----------
+    decomposition : Decomposition
+        Decomposed with ``covariance=`` (the observations' noise).
+    kappa : float or (C,) array_like
+
+    Returns
+    -------
+    (H, W, C) float32
+        ``wᵀ Σ w`` per pixel-channel, ``w_i = κ^{i+1}`` for the target's unknowns
+        (Eq. 3) and ``κ^i`` for ``(L̄_d, C R^0 L_d, …)`` off it (Eq. 4): how the noise of
+        component i is multiplied by ``κ^{i+1}``.
+
+    Raises
+    ------
+    InputError
+        The decomposition carries no covariance.
+
+    Examples
+    --------
+    >>> cov = np.array([1.0, 0.0, 4.0], np.float32).reshape(3, 1, 1, 1)  # Var c0 = 1, Var c1 = 4
+    >>> d = Decomposition(np.zeros((2, 1, 1, 1), np.float32), np.zeros((1, 1, 1), np.float32),
+    ...                   np.ones((1, 1), bool), covariance=cov)
+    >>> float(recolor_variance(d, 2.0)[0, 0, 0])          # 2² · 1 + 4² · 4
+    68.0
+    """
+    if not isinstance(decomposition, Decomposition):
+        raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
+    if decomposition.covariance is None:
+        raise InputError("the decomposition carries no covariance: decompose with covariance= to predict its noise")
+    k, h, w, c = decomposition.components.shape
+    kap = check_kappa(kappa, c)
+    powers = np.arange(k, dtype=np.float64)[:, None]
+    inside = kap[None, :] ** (powers + 1)
+    outside = kap[None, :] ** powers if decomposition.unreached_light else inside
+    weights = np.where(decomposition.target[None, :, :, None], inside[:, None, None, :], outside[:, None, None, :])
+    out = np.zeros((h, w, c), np.float64)
+    for i in range(k):
+        for j in range(k):
+            out += weights[i] * weights[j] * decomposition.covariance[packed_index(i, j, k)]
+    return out.astype(np.float32)
+
+
 @dataclass(frozen=True, eq=False)
 class PreviewPack:
     """A reduced-resolution copy of a decomposition, ready for fast recoloring.
@@ -125,7 +172,9 @@ def prepare_preview(decomposition: Decomposition, shape: tuple[int, int]) -> Pre
     Returns
     -------
     PreviewPack
-        ``recolor_preview(pack, κ)`` equals the area average of ``recolor(decomposition, κ)``.
+        ``recolor_preview(pack, κ)`` equals the area average of ``recolor(decomposition, κ)``;
+        with a covariance, ``recolor_variance(pack.decomposition, κ)`` is the mean of the
+        full-resolution pixels' predicted variance (exactly, in blocks wholly on or off the target).
     """
     if not isinstance(decomposition, Decomposition):
         raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
@@ -142,8 +191,9 @@ def prepare_preview(decomposition: Decomposition, shape: tuple[int, int]) -> Pre
     comps = area_average(decomposition.components, factor, axes=(1, 2))
     unreached = area_average(decomposition.unreached, factor)
     target = area_average(decomposition.target.astype(np.float32), factor) > 0.5
+    cov = None if decomposition.covariance is None else area_average(decomposition.covariance, factor, axes=(1, 2))
     small = Decomposition(
-        comps, unreached, target, decomposition.constraint, decomposition.unreached_light, None
+        comps, unreached, target, decomposition.constraint, decomposition.unreached_light, None, cov
     )
     return PreviewPack(small, (h / target.shape[0], w / target.shape[1]))
 

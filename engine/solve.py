@@ -298,3 +298,51 @@ def solve_systems(b, selector, solvers, destinations, out, extra=None, residual=
                     extra[cols] = x[i]
                 else:
                     out[row, cols] = x[i]
+
+
+def solve_weighted(b, covariance, selector, solvers, destinations, out, extra, covariance_out, residual, *,
+                   warm: bool = False) -> None:
+    """Generalised least squares of each column, weighted by its own noise covariance.
+
+    Parameters
+    ----------
+    b : (m, N) float32 or float64
+        Right-hand sides.
+    covariance : (m(m+1)/2, N) float
+        Each column's noise covariance, packed (:func:`engine.noise.packed_index`).
+    selector, solvers, destinations, out, extra
+        As in :func:`solve_systems`.
+    covariance_out : (n(n+1)/2, N) float32
+        Receives the packed covariance of each column's unknowns, in the solver's order.
+    residual : (N,) float64
+        Receives the unweighted ``‖A x − b‖²``.
+    warm : bool
+        ``out``/``extra`` already hold the unweighted constrained optimum
+        (:func:`solve_systems`): start the active-set search there.
+
+    Notes
+    -----
+    Each column minimises ``(A x − b)ᵀ Σ⁻¹ (A x − b)`` over ``x = P d, d ≥ 0`` (no
+    constraint for ``"none"``). A is square, so a column whose unconstrained solution
+    ``(A P)⁻¹ b`` is feasible keeps it whatever Σ (within the KKT tolerance of
+    :meth:`ConeSolver.tolerance`); the others are whitened by the Cholesky factor of their Σ
+    and solved by Lawson–Hanson active sets. The covariance of ``x`` is that of the final active set's weighted solve,
+    ``P_F (G_Fᵀ Σ⁻¹ G_F)⁻¹ P_Fᵀ`` — the estimate's spread when that set stays the optimum.
+    For a square ``A`` without an active constraint the estimate is ``A⁻¹ b`` whatever Σ.
+    """
+    from engine._kernels import gls_columns
+
+    if len({s.a.shape for s in solvers}) != 1 or solvers[0].a.shape[0] != solvers[0].a.shape[1]:
+        raise InputError("solvers must share one square shape")
+    n = solvers[0].a.shape[1]
+    a = np.stack([s.a for s in solvers])
+    basis = np.stack([np.eye(n) if s.basis is None else s.basis for s in solvers])
+    inverse = np.stack([np.linalg.inv(s.a @ p) for s, p in zip(solvers, basis, strict=True)])
+    ainv = np.stack([np.linalg.inv(s.a) for s in solvers])
+    pinv = np.stack([np.linalg.inv(p) for p in basis])
+    constrained = np.array([s.basis is not None for s in solvers])
+    dest = np.stack([np.asarray(d, np.int64) for d in destinations])
+    tol = solvers[0].tolerance(b.dtype)
+    with _KERNEL_LOCK:
+        gls_columns(b, covariance, np.asarray(selector, np.int64), a, basis, inverse, ainv, pinv, constrained, dest,
+                    tol if np.isfinite(tol) else 0.0, out, extra, covariance_out, residual, bool(warm))

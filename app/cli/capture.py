@@ -12,6 +12,7 @@ from app.cli.main import ProgressBar
 from engine.acquire import Adaptive, CaptureSettings
 from engine.errors import InputError
 from engine.imageio import read_mask
+from engine.noise import packed_index
 from engine.session import Session
 from engine.workflow import (
     adopt_calibration,
@@ -98,6 +99,13 @@ def run(args) -> int:
     )
     for name, prepared in result.targets:
         print(f"{name}: {prepared.report()}", file=sys.stderr)
+    acq = result.acquisition
+    if acq.covariance is not None:  # each observation's predicted noise on the target
+        k, t = len(acq.observations), acq.target.mask
+        rel = [float(np.sqrt(acq.covariance[packed_index(i, i, k)][t].mean())
+                     / max(float(np.abs(acq.observations[i][t]).mean()), 1e-30)) for i in range(k)]
+        print("predicted σ on the target: " + ", ".join(f"observation {i} {r:.2%}" for i, r in enumerate(rel)),
+              file=sys.stderr)
     if line := estimated_report(session):
         print(line, file=sys.stderr)
     return 0

@@ -20,6 +20,7 @@ from app.model.document import Document
 from app.model.files import export_image, open_document, save_document
 from engine.colour import convergence, parse_colour, to_hex
 from engine.errors import InputError, SessionError
+from engine.recolor import recolor, recolor_variance
 from engine.session import Session
 from engine.target_colour import TargetColour
 from engine.workflow import load_decomposition, saved_checker, target_albedo, target_colour, target_direct
@@ -167,6 +168,12 @@ def run(args) -> int:
     set_noise_reduction(doc, session, args.denoise)
     write(doc, args.output, half=args.half)
     print(f"wrote {args.output}", file=sys.stderr)
+    d = doc.acquisition.decomposition
+    if d.covariance is not None:  # the camera noise κ^(i+1) amplifies, on the target
+        sigma = float(np.sqrt(recolor_variance(d, new))[d.target].mean())
+        value = float(np.abs(recolor(d, new)[d.target]).mean())
+        print(f"predicted σ on the target: {sigma:.4g} (mean), {sigma / max(value, 1e-30):.1%} of its mean value",
+              file=sys.stderr)
     try:
         save_document(doc, session)
     except SessionError as exc:

@@ -18,7 +18,7 @@ import numpy as np
 from app.model.display import MAGNITUDE_MAP, SIGNED_MAP, false_colour, luminance, recolor_rgb32, robust_max, to_rgb32
 from app.model.render import Detail, PreviewFrame, Request, ScaleBar, ViewRenderer
 from engine.acquire.predict import relative_error
-from engine.recolor import area_average
+from engine.recolor import area_average, recolor, recolor_variance
 
 
 class CanvasView(StrEnum):
@@ -31,6 +31,7 @@ class CanvasView(StrEnum):
     COMPONENTS = "components"
     TRUTH = "truth"
     ERROR = "error"
+    NOISE = "noise"
 
 
 class Need(StrEnum):
@@ -142,6 +143,29 @@ def _render_error(r: ViewRenderer, req: Request) -> PreviewFrame:
                         note=note + " (preview resolution)")
 
 
+#: What the noise view says when the acquisition carries no noise model.
+NO_NOISE_BANNER = ("This acquisition carries no noise model (captured before the camera's noise was measured): "
+                   "recalibrate and capture again to see the predicted error.")
+
+
+def _render_noise(r: ViewRenderer, req: Request) -> PreviewFrame:
+    d = r.pack.decomposition
+    if d.covariance is None:
+        return PreviewFrame(CanvasView.NOISE, to_rgb32(r.small_photo, exposure=req.exposure), r.shape,
+                            banner=NO_NOISE_BANNER)
+    sigma = np.sqrt(recolor_variance(d, req.kappa))
+    shown = np.sqrt(np.mean(np.square(sigma), axis=-1))  # RMS over the channels
+    s = robust_max(shown)
+    note = ""
+    if d.target.any():
+        value = float(np.abs(recolor(d, req.kappa)[d.target]).mean())
+        mean = float(sigma[d.target].mean())
+        note = f"predicted σ on the target: mean {mean:.3g} ({100 * mean / max(value, 1e-30):.2f} % of its value)"
+    return PreviewFrame(CanvasView.NOISE, false_colour(shown, 0.0, s, MAGNITUDE_MAP), r.shape, linear=sigma,
+                        scale=ScaleBar(0.0, s, MAGNITUDE_MAP, "predicted σ of the recolored image (RMS over R, G, B)"),
+                        note=note)
+
+
 def _read_original(r: ViewRenderer, x: int, y: int, kappa, edit):
     return "original", r.photograph[y, x]
 
@@ -164,6 +188,13 @@ def _read_error(r: ViewRenderer, x: int, y: int, kappa, edit):
     return "recolored − truth", r.pixel(x, y, kappa) - r.truth_full(edit)[y, x]
 
 
+def _read_noise(r: ViewRenderer, x: int, y: int, kappa, edit):
+    d = r.decomposition.crop(y, y + 1, x, x + 1)
+    if d.covariance is None:
+        return "recolored (no noise model)", r.pixel(x, y, kappa)
+    return "predicted σ", np.sqrt(recolor_variance(d, kappa))[0, 0]
+
+
 _D, _T = Need.DECOMPOSITION, Need.TRUTH
 
 #: Every canvas view, in menu and toolbar order.
@@ -184,6 +215,10 @@ VIEWS: tuple[ViewSpec, ...] = (
     ViewSpec(CanvasView.ERROR, "&Error vs Ground Truth", "Error", "7", _render_error, _read_error,
              needs=frozenset({_D, _T}), fallback=CanvasView.TRUTH, edit=True,
              tip="|recolored − ground truth| and the relative error"),
+    ViewSpec(CanvasView.NOISE, "Predicted &Noise (σ)", "Noise σ", "8", _render_noise, _read_noise,
+             needs=frozenset({_D}), fallback=CanvasView.ORIGINAL,
+             tip="Predicted standard deviation of the recolored image from the camera's noise: where the edit is "
+                 "unreliable"),
 )
 VIEW_SPECS: dict[CanvasView, ViewSpec] = {spec.view: spec for spec in VIEWS}
 

@@ -142,6 +142,22 @@ class CameraModel:
         np.clip(raw, 0, white, out=raw)
         return raw, _any_channel(clipped)
 
+    def noise(self, exposure: float, gain: float) -> dict:
+        """The variance of a developed frame, ``shot · I + read`` (radiance units), and its clip level.
+
+        Photon noise ``I / (k t)``, read noise ``r² / (k t)²`` and ADC rounding
+        ``1 / (12 (t g calibration)²)``, with ``k`` the electrons per unit radiance per second;
+        ``clip`` is the radiance at which the frame saturates. Zero noise when ideal. This is
+        what :meth:`engine.noise.CameraNoise.from_metadata` reads from every frame.
+        """
+        electrons = self.electrons_per_radiance * exposure
+        scale = exposure * gain * self.calibration
+        clip = min(self.full_well / electrons, (self.white_level - self.black_level) / scale)
+        if self.ideal:
+            return {"shot": [0.0] * 3, "read": [0.0] * 3, "clip": clip}
+        read = self.read_noise**2 / electrons**2 + 1.0 / (12.0 * scale * scale)
+        return {"shot": [1.0 / electrons] * 3, "read": [read] * 3, "clip": clip}
+
     def develop(self, raw: np.ndarray, exposure: float, gain: float) -> np.ndarray:
         """Linear radiance from raw values: ``(raw - black) / (exposure * gain * calibration)``."""
         return ((raw - self.black_level) / (exposure * gain * self.calibration)).astype(np.float32)
@@ -243,7 +259,8 @@ class VirtualCamera:
         meta = {"device": self.name, "ideal": self.model.ideal, "ambient": bool(self._renderer.ambient),
                 "capture": self.captures, "calibration": self.model.calibration,
                 "white_level": self.model.white_level, "read_noise_e": self.model.read_noise,
-                "electrons_per_dn": self.model.electrons_per_dn}
+                "electrons_per_dn": self.model.electrons_per_dn,
+                "noise": self.model.noise(self._exposure, self._gain)}
         return Frame(image=image, exposure=self._exposure, gain=self._gain,
                      black_level=self.model.black_level, saturated=saturated, metadata=meta,
                      full_scale=self.model.full_scale(self._exposure, self._gain))

@@ -128,7 +128,8 @@ class VirtualProjector:
     ----------
     resolution : (Hp, Wp)
     bit_depth : int
-        8 (an ideal projector uses its input unquantised).
+        The model's input bits (8); 24 for an ideal projector, whose float32 input is used
+        unquantised (24 bits is float32's resolution near full light).
     model : ProjectorModel
     shown : int
         Number of frames shown so far.
@@ -137,7 +138,7 @@ class VirtualProjector:
     def __init__(self, model: ProjectorModel, resolution: tuple[int, int]):
         self.model = model
         self.resolution = (int(resolution[0]), int(resolution[1]))
-        self.bit_depth = model.bit_depth
+        self.bit_depth = 24 if model.ideal else model.bit_depth
         self.shown = 0
         self._input = np.zeros(self.resolution + (3,), np.float32)
         self._emitted = model.emit(self._input)

@@ -16,21 +16,25 @@ on the same target (:mod:`engine.acquire.predict`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from engine.acquire.emission import Emitter
+from engine.acquire.noise import Noise, covariance_stack
 from engine.acquire.predict import Adaptive, Policy, Predictor, relative_error
 from engine.acquire.recorder import Recorder
-from engine.acquire.steps import Acquisition, CaptureSettings, reemit
+from engine.acquire.steps import Acquisition, CaptureSettings, EmittedNoise, reemit
 from engine.acquire.target import PreparedTarget, pattern_budget, prepare_target
 from engine.calibrate import Calibration
 from engine.checks import check_kappa, check_order
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
+from engine.progress import report
 from engine.recolor import recolor
 from engine.session.edit import mask_digest, mask_name
 from engine.session.paths import NAME
+from engine.trust import recolor_trusted
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,8 +75,24 @@ class _Sequence:
         self.trusted = False
 
 
+class _Measured(NamedTuple):
+    """An image of the plan and its noise (None when the camera's noise is unknown)."""
+
+    image: np.ndarray
+    noise: Noise | None
+
+    def __add__(self, other: _Measured) -> _Measured:
+        both = self.noise is not None and other.noise is not None
+        return _Measured(self.image + other.image, self.noise + other.noise if both else None)
+
+    def __sub__(self, other: _Measured) -> _Measured:
+        both = self.noise is not None and other.noise is not None
+        return _Measured(self.image - other.image, self.noise - other.noise if both else None)
+
+
 class _Plan:
-    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix):
+    def __init__(self, recorder, calibration, prepared, kappas, order, settings, adaptive, photograph, base, prefix,
+                 shared):
         self.recorder = recorder
         self.prepared = prepared
         self.kappas = kappas
@@ -89,14 +109,25 @@ class _Plan:
             )
             for p in prepared
         ]
+        # D's relative error per target: one noise source shared by every re-emission on it
+        self.direct_noise = [
+            None if p.direct_variance is None else
+            (f"D:{prefix}-{i}", np.where(p.mask[:, :, None],
+                                         np.sqrt(p.direct_variance) / np.where(p.direct > 0, p.direct, 1), 0)
+             .astype(np.float32))
+            for i, p in enumerate(prepared)
+        ]
+        # noise sources more than one image holds: their covariances must survive merging
+        self.shared = set(shared) | {d[0] for d in self.direct_noise if d is not None}
         # (level, emission target) -> light emitted on the target -> the scene's response with
         # targets < level recolored: level 0 raw captures, level >= 1 recolored observations
         self.predictors = {}
+        self.noise_levels: dict = {}  # (level, target) -> relative noise of its last response
         self.log: list[dict] = []
         self.clamped = 0
         self.track_predictions = False  # validate predictions even when never using them (auto order)
 
-    def respond(self, level: int, target: int, wanted: np.ndarray, path: str, seq: _Sequence) -> np.ndarray:
+    def respond(self, level: int, target: int, wanted: _Measured, path: str, seq: _Sequence) -> _Measured:
         """The response to emitting ``wanted`` on ``target``, targets < ``level`` recolored.
 
         Level 0 is a capture (base light removed). Level ≥ 1 is a recolored observation: a
@@ -104,38 +135,80 @@ class _Plan:
         unless the prediction policy accepts a linear prediction from earlier emissions on the
         same target at the same level (Sec. 5's recolored prediction), which skips them all.
         """
-        predictor = self.predictors.setdefault((level, target), Predictor(self.prepared[target].mask))
+        key = (level, target)
+        predictor = self.predictors.setdefault(key, Predictor(self.prepared[target].mask))
         policy = Policy(self.adaptive.policy)
-        guess = predictor.predict(wanted) if policy is not Policy.BRUTE or self.track_predictions else None
-        use_guess = guess is not None and (
-            (policy is Policy.SPAN and guess.bound < self.adaptive.threshold) or (policy is Policy.LINEAR and seq.trusted)
-        )
+        guess = predictor.predict(wanted.image) if policy is not Policy.BRUTE or self.track_predictions else None
+        band = self._band(key)
+        use_guess, reason = False, ""
+        if guess is not None and policy is Policy.SPAN:
+            use_guess = guess.bound < band
+            reason = (f"error bound {guess.bound:.2%} " + ("within" if use_guess else "above")
+                      + (f" the capture's noise {band:.2%}" if band > self.adaptive.threshold
+                         else f" the threshold {self.adaptive.threshold:.2%}"))
+        elif guess is not None and policy is Policy.LINEAR and seq.trusted:
+            use_guess, reason = True, "the sequence's prediction was validated"
         saves = self.order**level  # images a prediction at this level replaces
         if use_guess:
             self.log.append({"path": path, "target": target, "level": level, "source": "predicted",
-                             "captures": [], "bound": guess.bound, "images": saves})
-            return guess.image
+                             "captures": [], "bound": guess.bound, "images": saves, "reason": reason})
+            noise = guess.noise
+            if noise is not None:  # what the light's fit leaves out, at the image's scale (Eq. 10)
+                noise = noise + Noise.fresh(np.abs(guess.image) * guess.light_error.astype(np.float32), "prediction")
+            return _Measured(guess.image, noise)
         if level == 0:
-            image, names, clamped = reemit(self.recorder, self.emitters[target], wanted, self.base, name=f"{self.prefix}-{path}")
-            self.clamped += clamped
-            entry = {"path": path, "target": target, "level": 0, "source": "captured", "captures": names}
+            emitted = None
+            if wanted.noise is not None and self.base.noise is not None:
+                emitted = EmittedNoise(wanted.noise, self.base.noise, self.direct_noise[target])
+            done = reemit(self.recorder, self.emitters[target], wanted.image, self.base.image,
+                          name=f"{self.prefix}-{path}", noise=emitted)
+            self.clamped += done.clamped
+            result = _Measured(done.light, done.noise)
+            entry = {"path": path, "target": target, "level": 0, "source": "captured", "captures": done.names}
         else:
-            image = self._recolor_lower(level, (target, wanted, seq), path)
+            result = self._recolor_lower(level, (target, wanted, seq), path)
             entry = {"path": path, "target": target, "level": level, "source": "computed", "captures": []}
+        noise_level = _relative_noise(result)
+        if noise_level is not None:
+            self.noise_levels[key] = noise_level
         if guess is not None:
-            entry["prediction_error"] = relative_error(guess.image, image)
-            if policy is Policy.LINEAR and entry["prediction_error"] < self.adaptive.threshold:
-                seq.trusted = True
+            error = relative_error(guess.image, result.image)
+            own = _prediction_error(guess, result, error)  # the prediction's error, noise removed
+            band = self._band(key)
+            entry["prediction_error"] = error
+            entry["prediction_error_without_noise"] = own
+            entry["predictable"] = own < band
+            if policy is Policy.LINEAR:
+                seq.trusted = seq.trusted or own < band
+                reason = f"prediction off by {own:.2%} beyond the noise, " + ("within" if own < band else "above")
+                reason += f" the capture's noise {band:.2%}" if band > self.adaptive.threshold else \
+                    f" the threshold {self.adaptive.threshold:.2%}"
+        if not reason:
+            reason = ("brute force" if policy is Policy.BRUTE else "no earlier light to predict from" if guess is None
+                      else "the sequence's prediction is not validated yet")
+        entry["reason"] = reason
         self.log.append(entry)
-        predictor.add(wanted, image)
-        return image
+        predictor.add(wanted.image, result.image, result.noise)
+        return result
 
-    def observations(self, level: int, target: int, lighting, path: str, *, auto: bool = False) -> np.ndarray:
+    def _band(self, key) -> float:
+        """What a prediction must beat: the threshold, or the noise of the last response at ``key``.
+
+        A prediction whose error is within the noise its capture would carry is as good as
+        the capture (Sec. 5's threshold, made noise-aware).
+        """
+        if not self.adaptive.noise_band:
+            return self.adaptive.threshold
+        return max(self.adaptive.threshold, self.noise_levels.get(key, 0.0))
+
+    def observations(self, level: int, target: int, lighting, path: str, *, auto: bool = False) -> list[_Measured]:
         """The K observations of ``target`` under ``lighting``, targets < level recolored.
 
         With ``auto`` (one target, Sec. 5's last paragraph) captures continue until the linear
-        prediction of the newest capture from the earlier ones is within the threshold, up to
-        MAX_ORDER observations; ``self.order`` is then the order reached.
+        prediction of the newest capture from the earlier ones is within the threshold or the
+        capture's own noise (its error with the two images' noise removed), up to MAX_ORDER
+        observations; ``self.order`` is then the order reached. The order the recolor uses is
+        then chosen per region and channel by :mod:`engine.trust`.
         """
         seq = _Sequence()
         obs = [self.recolored(level, lighting, f"{path}.0" if path else "photograph")]
@@ -145,13 +218,13 @@ class _Plan:
             sub = f"{path}.{s}" if path else f"r{s}"
             light = self.recolored(level, (target, wanted, seq), sub)
             obs.append(light + obs[s - 1] if diff else light)
-            if auto and self.log[-1].get("prediction_error", np.inf) < self.adaptive.threshold:
+            if auto and self.log[-1].get("predictable", False):
                 break
         if auto:
             self.order = len(obs)
-        return np.stack(obs).astype(np.float32)
+        return obs
 
-    def recolored(self, level: int, lighting, path: str) -> np.ndarray:
+    def recolored(self, level: int, lighting, path: str) -> _Measured:
         """The scene under ``lighting`` (None: the photograph's) with targets < level recolored."""
         if lighting is not None:
             target, wanted, seq = lighting
@@ -160,11 +233,28 @@ class _Plan:
             return self.photograph
         return self._recolor_lower(level, None, path)
 
-    def _recolor_lower(self, level: int, lighting, path: str) -> np.ndarray:
-        """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ."""
+    def _recolor_lower(self, level: int, lighting, path: str) -> _Measured:
+        """Decompose target ``level - 1`` under ``lighting`` and recolor it with its fixed κ.
+
+        With the noise known this is the noise-aware recolor (:mod:`engine.trust`): the
+        photograph's noise is carried exactly (scaled as the recolor scales it), the rest of
+        its predicted error as a new independent source.
+        """
         t = level - 1
         obs = self.observations(t, t, lighting, path)
-        return recolor(self.prepared[t].decompose(obs), self.kappas[t])
+        stack = np.stack([o.image for o in obs]).astype(np.float32)
+        if any(o.noise is None for o in obs) or len(obs) < 2:
+            image = recolor(self.prepared[t].decompose(stack), self.kappas[t])
+            return _Measured(image, None)
+        covariance = covariance_stack([o.noise for o in obs], stack.shape[1:])
+        result = recolor_trusted(self.prepared[t].trust(stack, covariance), self.kappas[t])
+        photo = stack[0].astype(np.float64)
+        lit = np.abs(photo) > 1e-6 * max(float(np.abs(photo).max()), 1e-30)
+        scale = np.divide(result.image, photo, out=np.zeros_like(photo), where=lit)
+        carried = obs[0].noise * scale.astype(np.float32)
+        rest = np.maximum(np.square(result.sigma.astype(np.float64)) - np.square(scale) * obs[0].noise.variance(), 0)
+        noise = carried + Noise.fresh(np.sqrt(rest).astype(np.float32), "recolored")
+        return _Measured(result.image, noise.merged(self.shared))
 
 
 def capture_stem(target: str, mask) -> str:
@@ -264,24 +354,37 @@ def acquire_cascade(
     t_count = len(targets)
     d_cost = 0 if prepared is not None else t_count * pattern_budget(True)
     recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + (k**t_count - 1) * settings.captures_per_step()
+    if recorder.noise is None and calibration.noise is not None:
+        recorder.noise = calibration.noise
     photo_pattern = recorder.black() if photograph_pattern is None else np.asarray(photograph_pattern, np.float32)
-    photograph = recorder.capture(f"{prefix}-photograph", photo_pattern, meta={"kind": "photograph"})
-    base = photograph if photograph_pattern is None else recorder.capture(f"{prefix}-black", recorder.black(), meta={"kind": "black"})
+    photo_name = f"{prefix}-photograph"
+    photograph = _measure(recorder, photo_name, photo_pattern, {"kind": "photograph"})
+    base_name = photo_name if photograph_pattern is None else f"{prefix}-black"
+    base = photograph if photograph_pattern is None else _measure(recorder, base_name, recorder.black(),
+                                                                  {"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base, name=f"{prefix}-{capture_stem(n, m)}")
+            prepare_target(recorder, calibration, m, base.image, name=f"{prefix}-{capture_stem(n, m)}")
             for n, m in targets
         ]
-    plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix)
+    plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix,
+                 {photo_name, base_name})
     last = t_count - 1
     plan.track_predictions = auto
-    obs = plan.observations(last, last, None, "", auto=auto)
+    measured = plan.observations(last, last, None, "", auto=auto)
+    obs = np.stack([m.image for m in measured]).astype(np.float32)
+    covariance = None
+    if all(m.noise is not None for m in measured):
+        covariance = covariance_stack([m.noise for m in measured], obs.shape[1:])
     captured = [e for e in plan.log if e["source"] == "captured"]
     predicted = sum(e["images"] for e in plan.log if e["source"] == "predicted")
     acq_log = [{"index": 0, "source": "photograph", "captures": [f"{prefix}-photograph"]}] + [
         {"index": i + 1, **e} for i, e in enumerate(plan.log) if e["source"] != "computed"
     ]
-    acquisition = Acquisition(obs, prepared[last], base, plan.clamped, acq_log)
+    acquisition = Acquisition(obs, prepared[last], base.image, plan.clamped, acq_log, covariance)
+    # negative noise split off only where there was some: fewer shots than planned, the count is final
+    recorder.planned = recorder.count
+    report(recorder.progress, recorder.count, recorder.planned, "acquisition done")
     return CascadeResult(
         acquisition=acquisition,
         targets=list(zip(names, prepared)),
@@ -291,6 +394,38 @@ def acquire_cascade(
         captures=1 + sum(len(e["captures"]) for e in captured),
         log=acq_log,
     )
+
+
+def _relative_noise(measured: _Measured) -> float | None:
+    """``√Σ Var / ‖image‖``: the relative noise of an image (None when unknown)."""
+    if measured.noise is None:
+        return None
+    var = measured.noise.variance()
+    norm = float(np.linalg.norm(measured.image))
+    return float(np.sqrt(np.sum(var, dtype=np.float64)) / norm) if var is not None and norm > 0 else 0.0
+
+
+def _prediction_error(guess, result: _Measured, error: float) -> float:
+    """The prediction's own relative error: the measured one with the two images' noise removed.
+
+    ``‖p − c‖² ≈ e² + Σ Var(p − c)`` for a prediction p of a capture c; without the noises
+    known, the measured error itself.
+    """
+    if guess.noise is None or result.noise is None:
+        return error
+    diff = result.noise - guess.noise
+    var = diff.variance()
+    norm = float(np.linalg.norm(result.image))
+    if var is None or norm == 0:
+        return error
+    return float(np.sqrt(max(error**2 - float(np.sum(var, dtype=np.float64)) / norm**2, 0.0)))
+
+
+def _measure(recorder: Recorder, name: str, pattern: np.ndarray, meta: dict) -> _Measured:
+    """A capture and its noise (one source named after it)."""
+    image = recorder.capture(name, pattern, meta=meta)
+    var = recorder.last_variance
+    return _Measured(image, None if var is None else Noise.source(name, np.sqrt(var)))
 
 
 def acquire_single(

@@ -119,7 +119,7 @@ class Emitter:
             Number of target pixel-channels whose negative value was emitted as zero.
         """
         t = self.target[:, :, None]
-        light = self._light(wanted)  # linear projector light per primary, camera space
+        light = self.light(wanted)  # linear projector light per primary, camera space
         clamped = int(np.count_nonzero((light < 0) & t))
         if self.negative == Negative.SPLIT:
             parts = [(np.maximum(light, 0), 1, ""), (np.maximum(-light, 0), -1, "-neg")]
@@ -136,7 +136,7 @@ class Emitter:
                 if peak <= 0:
                     continue
                 scale = self.tau / peak
-                proj = warp_to_projector(plane * scale, self.correspondence, target=self.target)
+                proj = self._warp(plane * scale)
                 proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
                 short = None
                 if self.complete_direct:
@@ -190,7 +190,22 @@ class Emitter:
                 out = part if out is None else out + part
         return out
 
-    def _light(self, wanted: np.ndarray) -> np.ndarray:
+    def _warp(self, light: np.ndarray) -> np.ndarray:
+        """Camera-space projector light to the projector pattern.
+
+        Where several camera pixels see one projector pixel (a projector coarser than the
+        camera), the pattern is ``Σ D·light / Σ D`` over them: the direct light they receive
+        together is what they want together. (The plain mean of ``light = wanted / D`` would
+        not conserve it where D varies inside the footprint, a bias every re-emission repeats.)
+        """
+        if not self.per_channel and self.direct_matrix is not None:
+            return warp_to_projector(light, self.correspondence, target=self.target)
+        d = np.where(self.target[:, :, None], self.direct, 0.0).astype(np.float32)
+        num = warp_to_projector(light * d, self.correspondence, target=self.target)
+        den = warp_to_projector(d, self.correspondence, target=self.target)
+        return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0).astype(np.float32)
+
+    def light(self, wanted: np.ndarray) -> np.ndarray:
         """Projector light (per primary, camera pixels) whose direct reflection is ``wanted``."""
         t = self.target[:, :, None]
         if self.per_channel or self.direct_matrix is None:

@@ -28,6 +28,8 @@ from enum import StrEnum
 
 import numpy as np
 
+from engine.acquire.noise import Noise
+
 
 class Policy(StrEnum):
     """When predictions replace captures: ``brute`` never, ``linear`` (paper), ``span`` (ours)."""
@@ -46,13 +48,18 @@ class Adaptive:
     policy : {"brute", "linear", "span"}
     threshold : float
         Relative error accepted for a predicted observation (paper: 1 %).
+    noise_band : bool
+        Also accept a prediction whose error is within the noise its capture would carry
+        (the relative noise of the last response on that target): such a prediction is as
+        good as the capture. Needs the camera's noise (else the threshold alone decides).
     """
 
     policy: str = Policy.SPAN
     threshold: float = 0.01
+    noise_band: bool = True
 
     def to_dict(self) -> dict:
-        return {"policy": str(self.policy), "threshold": self.threshold}
+        return {"policy": str(self.policy), "threshold": self.threshold, "noise_band": self.noise_band}
 
 
 @dataclass(frozen=True)
@@ -67,11 +74,18 @@ class Prediction:
         ``‖L − Σ w_i L_i‖ / ‖L‖`` per channel (Eq. 10's residual).
     bound : float
         Upper bound of the predicted image's relative error (largest over channels).
+    weights : (m, 3) float
+        ``w_i`` per channel, one row per recorded pair.
+    noise : Noise or None
+        The prediction's noise, ``Σ w_i`` times the recorded captures' noise (None when
+        one of them is unknown).
     """
 
     image: np.ndarray
     light_error: np.ndarray
     bound: float
+    weights: np.ndarray | None = None
+    noise: Noise | None = None
 
 
 @dataclass
@@ -87,11 +101,13 @@ class Predictor:
     mask: np.ndarray
     lights: list = field(default_factory=list)  # each (n, 3) float64: light on the target pixels
     images: list = field(default_factory=list)  # each (H, W, 3) float32: base-removed capture
+    noises: list = field(default_factory=list)  # each Noise or None
 
-    def add(self, light: np.ndarray, image: np.ndarray) -> None:
-        """Record an emitted light (camera space, (H, W, 3)) and the capture it caused."""
+    def add(self, light: np.ndarray, image: np.ndarray, noise: Noise | None = None) -> None:
+        """Record an emitted light (camera space, (H, W, 3)) and the capture it caused (and its noise)."""
         self.lights.append(np.asarray(light, np.float64)[self.mask])
         self.images.append(np.asarray(image, np.float32))
+        self.noises.append(noise)
 
     def predict(self, light: np.ndarray) -> Prediction | None:
         """Predict the capture of ``light`` from the pairs so far (None without any).
@@ -109,12 +125,14 @@ class Predictor:
         image = np.zeros(self.images[0].shape, np.float64)
         err = np.zeros(3)
         bound = 0.0
+        weights = np.zeros((len(self.images), 3))
         for c in range(3):
             a, y = basis[:, c, :], want[:, c]
             norm = np.linalg.norm(y)
             if norm == 0:
                 continue
             w, *_ = np.linalg.lstsq(a, y, rcond=None)
+            weights[:, c] = w
             err[c] = np.linalg.norm(a @ w - y) / norm
             image[..., c] = stack[..., c, :] @ w
             light_norms = np.linalg.norm(a, axis=0)
@@ -126,7 +144,12 @@ class Predictor:
             gains = np.linalg.norm(stack[..., c, :].reshape(-1, stack.shape[-1]), axis=0)[ok] / light_norms[ok]
             spread = gains.max() / max(gains.min(), 1e-30)
             bound = max(bound, err[c] * spread)
-        return Prediction(image.astype(np.float32), err, float(bound))
+        noise = None
+        if all(n is not None for n in self.noises):
+            noise = Noise()
+            for w, n in zip(weights, self.noises, strict=True):
+                noise = noise + n * w.astype(np.float32)
+        return Prediction(image.astype(np.float32), err, float(bound), weights, noise)
 
 
 def relative_error(image: np.ndarray, reference: np.ndarray, keep: np.ndarray | None = None) -> float:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from engine.errors import DeviceError, DiskFull, SessionError
+from engine.noise import CameraNoise, frame_variance
 from engine.progress import Progress, ShouldStop, checkpoint, report
 from engine.rig import Frame, RigLike
 from engine.session import Session, pattern_hash
@@ -48,6 +49,9 @@ class Recorder:
         Up to this many shorter exposures (each ``bracket_step`` times shorter) complete the
         saturated pixels of a frame; 0 keeps clipped frames as they are.
     bracket_step : float
+    noise : CameraNoise, optional
+        The camera's noise as the calibration measured it, for frames whose backend does
+        not report its own (``Frame.metadata["noise"]``).
 
     Attributes
     ----------
@@ -57,6 +61,9 @@ class Recorder:
         Number of captures the current plan expects (for progress).
     last_saturated : (H, W) bool or None
         Clipped pixels of the last capture (after bracketing), None if unknown.
+    last_variance : (H, W, 3) float32 or None
+        Variance of the last capture (:func:`engine.noise.frame_variance`), None when
+        neither the frame nor :attr:`noise` knows the camera's noise.
     """
 
     rig: RigLike
@@ -67,10 +74,12 @@ class Recorder:
     frames: int = 1
     brackets: int = 3
     bracket_step: float = 8.0
+    noise: CameraNoise | None = None
     taken: list[str] = field(default_factory=list)
     reused: list[str] = field(default_factory=list)
     planned: int = 0
     last_saturated: np.ndarray | None = None
+    last_variance: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -112,6 +121,9 @@ class Recorder:
                 )
             loaded = self.session.load_capture(name)
             image, self.last_saturated = loaded.image, loaded.saturated
+            meta = record.meta
+            self.last_variance = frame_variance(image, float(meta.get("exposure", 1.0) or 1.0), meta.get("metadata"),
+                                                self.noise)
             self.reused.append(name)
         else:
             checkpoint(self.should_stop, "acquisition")
@@ -121,6 +133,8 @@ class Recorder:
             frame = self._bracketed(self._shot(identity), identity)
             image = np.asarray(frame.image, np.float32)
             self.last_saturated = np.asarray(frame.saturated, bool)
+            self.last_variance = frame_variance(image, float(frame.exposure), getattr(frame, "metadata", None),
+                                                self.noise)
             if self.session is not None:
                 try:
                     self.session.add_frame(name, frame, pattern_id=pid, meta=meta or {})

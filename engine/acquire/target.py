@@ -35,6 +35,7 @@ from engine.decompose import Decomposition, decompose
 from engine.edge import blend_edges, check_coverage, is_soft
 from engine.errors import InputError
 from engine.fill import fill_unreachable
+from engine.trust import TrustedDecomposition, decompose_orders, prepare_trust
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +58,9 @@ class PreparedTarget:
         Per pixel, camera channel c's direct radiance per unit of projector primary k
         (``[..., c, k]``): colour crosstalk and albedo together. Measured when D is measured
         per primary; lets one RGB emission replace three single-primary ones.
+    direct_variance : (H, W, 3) float32 or None
+        Variance of D from the camera noise of the captures it was measured from (None when
+        the camera's noise is unknown). D's error is the same in every re-emission.
     coverage : (H, W) float32 or None
         The soft mask the target was painted with (None: a hard mask). Its solid pixels are
         ``mask | unreachable``; its edge pixels (0 < coverage < 1) are blended when decomposing.
@@ -68,25 +72,40 @@ class PreparedTarget:
     correspondence: Correspondence
     filled: int = 0
     direct_matrix: np.ndarray | None = None
+    direct_variance: np.ndarray | None = None
     coverage: np.ndarray | None = None
 
     def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3,
-                  edge_radius: int = 1) -> Decomposition:
+                  edge_radius: int = 1, covariance=None, constraint: str = "ordered") -> Decomposition:
         """Decompose on the emittable pixels, then estimate the unreachable and edge ones near them.
 
-        :func:`engine.decompose.decompose` on :attr:`mask`, then
-        :func:`engine.fill.fill_unreachable` with the painted target (``mask | unreachable``):
-        unreachable pixels within ``fill_radius`` pixels of emittable ones get their
-        neighbours' interaction shares (0 leaves every one of them out); then, for a soft
-        mask, :func:`engine.edge.blend_edges` recolors its edge pixels from both sides'
-        shares within ``edge_radius`` pixels.
+        :func:`engine.decompose.decompose` on :attr:`mask` (weighted by ``covariance`` when
+        given), then :func:`engine.fill.fill_unreachable` with the painted target
+        (``mask | unreachable``): unreachable pixels within ``fill_radius`` pixels of
+        emittable ones get their neighbours' interaction shares (0 leaves every one of them
+        out); then, for a soft mask, :func:`engine.edge.blend_edges` recolors its edge pixels
+        from both sides' shares within ``edge_radius`` pixels.
         """
         photograph = np.asarray(observations)[0]
-        d = decompose(observations, self.mask, unreached_light=unreached_light)
+        d = decompose(observations, self.mask, unreached_light=unreached_light, covariance=covariance,
+                      constraint=constraint)
         d = fill_unreachable(d, self.mask | self.unreachable, photograph, radius=fill_radius)[0]
         if self.coverage is not None:
             d = blend_edges(d, self.coverage, photograph, radius=edge_radius)[0]
         return d
+
+    def trust(self, observations, covariance, *, unreached_light: bool = True, fill_radius: int = 3,
+              should_stop=None) -> TrustedDecomposition:
+        """The observations ready for noise-aware recoloring (:mod:`engine.trust`).
+
+        Unconstrained weighted decompositions of every order up to the observations' (the
+        first k observations are an order-k acquisition), unreachable pixels filled as in
+        :meth:`decompose`, shares smoothed by :func:`engine.trust.prepare_trust`.
+        """
+        obs = np.asarray(observations)
+        orders = [fill_unreachable(d, self.mask | self.unreachable, obs[0], radius=fill_radius)[0]
+                  for d in decompose_orders(obs, self.mask, covariance, unreached_light=unreached_light)]
+        return prepare_trust(orders, obs[0], should_stop=should_stop)
 
     def report(self) -> str:
         """One line for logs and dialogs."""
@@ -190,10 +209,14 @@ def prepare_target(
     ok = painted_valid[:, :, None] & (n_plus > 0) & (n_minus > 0)
     brightest = np.full(base.shape, -np.inf)  # correspondence-free max - min, to check it
     darkest = np.full(base.shape, np.inf)
+    variance = np.zeros(base.shape, np.float64)  # of D: lit and unlit means, base cancels
+    known = True
     for g, channels in enumerate(groups):
         label = "rgb"[channels[0]] if per_channel else "rgb"
         plus = np.zeros(base.shape, np.float64)
         minus = np.zeros_like(plus)
+        var_plus = np.zeros_like(plus)
+        var_minus = np.zeros_like(plus)
         hi = np.full(base.shape, -np.inf)
         lo = np.full(base.shape, np.inf)
         for i, pattern in enumerate(patterns):
@@ -205,11 +228,17 @@ def prepare_target(
             light = cap - base
             plus += np.where(lit_full[i][:, :, None], light, 0)
             minus += np.where(unlit_full[i][:, :, None], light, 0)
+            if recorder.last_variance is None:
+                known = False
+            else:
+                var_plus += np.where(lit_full[i][:, :, None], recorder.last_variance, 0)
+                var_minus += np.where(unlit_full[i][:, :, None], recorder.last_variance, 0)
             np.maximum(hi, light, out=hi)
             np.minimum(lo, light, out=lo)
         matrix[..., g] = np.where(ok, plus / np.maximum(n_plus, 1) - minus / np.maximum(n_minus, 1), 0)
         for c in channels:
             brightest[..., c], darkest[..., c] = hi[..., c], lo[..., c]
+            variance[..., c] = (var_plus / np.maximum(n_plus, 1) ** 2 + var_minus / np.maximum(n_minus, 1) ** 2)[..., c]
     direct = np.stack([matrix[..., c, c] for c in range(3)], -1) if per_channel else matrix[..., 0]
     # a wrong correspondence mixes lit and unlit captures: its D falls far below max - min
     consistent = (direct >= consistency * (brightest - darkest)).all(axis=-1)
@@ -219,7 +248,9 @@ def prepare_target(
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
-    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix, coverage)
+    variance = np.where(usable[:, :, None], variance, 0).astype(np.float32) if known else None
+    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix, variance,
+                          coverage)
 
 
 def _conflicts(corr: Correspondence, target: np.ndarray, *, distance: float = 0.0, margin: int = 0) -> np.ndarray:

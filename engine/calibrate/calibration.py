@@ -13,6 +13,7 @@ from engine.calibrate.graycode import Correspondence
 from engine.calibrate.response import ProjectorResponse
 from engine.checks import check_image, check_resolution
 from engine.errors import InputError
+from engine.noise import CameraNoise
 from engine.rig import fingerprint_differences
 
 __all__ = ["CALIBRATION_VERSION", "Calibration"]
@@ -48,7 +49,8 @@ class Calibration:
         Camera→projector pixels.
     crosstalk : Crosstalk or None
     metadata : dict
-        JSON-serialisable facts (date, exposure, gain, settle delay, notes).
+        JSON-serialisable facts (date, exposure, gain, settle delay, notes); ``"noise"`` the
+        camera noise measured from repeated frames (:meth:`noise`).
     """
 
     rig_name: str
@@ -83,6 +85,12 @@ class Calibration:
         object.__setattr__(self, "projector_resolution", proj)
         object.__setattr__(self, "black_frame", black)
         object.__setattr__(self, "metadata", dict(self.metadata))
+
+    @property
+    def noise(self) -> CameraNoise | None:
+        """The camera's noise measured during calibration (None for calibrations without it)."""
+        d = self.metadata.get("noise")
+        return None if d is None else CameraNoise.from_dict(d)
 
     def check_compatible(self, rig_name: str, camera_resolution, projector_resolution,
                          fingerprint: dict | None = None) -> None:

@@ -284,8 +284,10 @@ def run_capture(
     pattern (noise ∝ 1/sqrt(frames)). The plan (targets in order, order, fixed κ, settings) is
     written to the session's state before the first capture, masks to ``masks/`` under
     :func:`engine.session.edit.mask_name`; re-running with the same session resumes. The last
-    target's decomposition is cached under :func:`decomposition_key`, and every target's D is
-    kept (:mod:`engine.session.colour`: absolute albedo with a colour checker).
+    target's decomposition is cached under :func:`decomposition_key`, weighted by the
+    observations' noise and with its covariance when the camera's noise is known
+    (:func:`engine.recolor.recolor_variance` then predicts a recolor's σ), and every target's D
+    is kept (:mod:`engine.session.colour`: absolute albedo with a colour checker).
 
     Returns
     -------
@@ -313,7 +315,7 @@ def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, ad
     last = result.targets[-1][1]
     session.write_mask(mask_name(f"{targets[-1][0]} emittable", mask_digest(last.mask)), last.mask)
     store_directs(session, result.targets)
-    d = last.decompose(result.acquisition.observations)
+    d = last.decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
     session.update(
         status="captured",
         result={

@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
-DECOMPOSITION_VERSION = 1
+DECOMPOSITION_VERSION = 2
 
 
 def decomposition_key(session: Session) -> str:
@@ -193,7 +193,7 @@ def _recompute(session: Session, rig=None) -> Decomposition:
     recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session)
     result = acquire_cascade(recorder, load_calibration(session), targets, plan["order"],
                              fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive)
-    return result.targets[-1][1].decompose(result.acquisition.observations)
+    return result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
 
 
 def photograph_name(session: Session, edit: Edit | None = None) -> str:

@@ -19,7 +19,7 @@ def test_check_virtual_rig_reports_resolutions_frame_and_saturation():
     with open_rig("virtual:cornell", ideal=True) as rig:
         (h, w), (hp, wp) = rig.camera.resolution, rig.projector.resolution
         exposure = rig.camera.exposure
-    assert f"{w}x{h}" in lines[1] and f"{wp}x{hp}, 8-bit" in lines[2]
+    assert f"{w}x{h}" in lines[1] and f"{wp}x{hp}, 24-bit" in lines[2]  # the ideal projector: float32 input, unrounded
     assert f"exposure {exposure:g} s" in report
     assert "saturated: 0.00% of pixels" in report
 

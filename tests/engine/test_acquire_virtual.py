@@ -85,7 +85,8 @@ def test_realistic_rig_recolors_within_bound(rig, tmp_path):
         floor = _error(photo, r.truth.photograph())  # camera noise alone, at kappa = 1
         naive = np.where(mask[:, :, None], photo * kappa.astype(np.float32), photo)
         print(f"realistic: ours {_error(out, truth):.4f}, naive {_error(naive, truth):.4f}, noise floor {floor:.4f}")
-        # measured: ours 1.38 %, naive 1.89 %, floor 0.65 % (48x48, 8 frames)
+        # measured: ours 1.42 %, naive 2.20 %, floor 0.65 % (48x48, 8 frames, supersampled rig with a
+        # half-resolution projector; the decomposition weighted by the noise model; unweighted 1.43 %)
         assert _error(out, truth) < 0.85 * _error(naive, truth)
         assert _error(out, truth) < 2.5 * floor
 
@@ -168,7 +169,9 @@ def test_rgb_emission_corrects_crosstalk_per_pixel_with_a_third_of_the_captures(
             s = _session(tmp_path / f"s{per_channel}", r)
             run_calibration(r, s)
             mask = r.targets["right_wall"]
-            result = run_capture(r, s, [("right_wall", mask)], 4, settings=CaptureSettings(per_channel=per_channel))
+            # clamped negatives: one capture per step (split would add captures where noise goes negative)
+            result = run_capture(r, s, [("right_wall", mask)], 4,
+                                 settings=CaptureSettings(per_channel=per_channel, negative="clamp"))
             errors[per_channel] = _error(recolor(load_decomposition(s), KAPPA), r.truth.recolor([(mask, KAPPA)]))
             shots[per_channel] = result.captures
     assert shots == {True: 1 + 3 * 3, False: 1 + 3}

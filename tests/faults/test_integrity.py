@@ -35,7 +35,9 @@ def _rewrite(entry: Path, change) -> None:
     [
         (lambda a: a.update(components=a["components"][:, :8]), "unreached must be a float array of shape (8, 16, 3)"),
         (lambda a: a.update(components=a["components"][:, :8], unreached=a["unreached"][:8], target=a["target"][:8],
-                            residual=a["residual"][:8]), "it is 16×8, the session 16×16"),
+                            residual=a["residual"][:8], **({"covariance": a["covariance"][:, :8]}
+                                                           if "covariance" in a else {})),
+         "it is 16×8, the session 16×16"),
         (lambda a: a["components"].__setitem__((0, 3, 3, 0), np.nan), "non-finite"),
         (lambda a: a.pop("components"), "lack ['components']"),
         (lambda a: a.update(target=a["target"].astype(np.float32)), "target must be a bool array"),

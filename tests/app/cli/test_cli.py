@@ -42,6 +42,7 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     # the headless recolor of the demo's session writes the same image
     again = _run("recolor", str(out / "session"), "--kappa", "2,0.125,8", "-o", str(tmp_path / "again.exr"))
     assert again.returncode == 0, again.stderr
+    assert re.search(r"predicted σ on the target: \S+ \(mean\), [0-9.]+% of its mean value", again.stderr), again.stderr
     np.testing.assert_allclose(read_image(tmp_path / "again.exr"), read_image(out / "recolored.exr"), rtol=1e-6)
     exported = _run("export", str(out / "session"), "-o", str(tmp_path / "export.tif"))
     assert exported.returncode == 0, exported.stderr

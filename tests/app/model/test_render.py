@@ -180,7 +180,7 @@ def test_no_detail_where_the_preview_is_full_resolution_or_the_view_is_diagnosti
     assert views.render_detail(ViewRenderer(photo, d).prepare(), Request(CanvasView.RECOLORED), (0, 10, 0, 10)) is None
     small = ViewRenderer(photo, d, max_shape=(12, 16)).prepare()
     diagnostic = {v for v in CanvasView if not views.shown(small, v).detail}
-    assert diagnostic == {CanvasView.DIFFERENCE, CanvasView.COMPONENTS}  # truth views fall back to the original
+    assert diagnostic == {CanvasView.DIFFERENCE, CanvasView.COMPONENTS, CanvasView.NOISE}  # truth views: the original
     for view in diagnostic:
         assert views.render_detail(small, Request(view), (0, 10, 0, 10)) is None
     assert views.render_detail(small, Request(CanvasView.RECOLORED), (60, 70, 0, 10)) is None  # outside the image
@@ -188,3 +188,30 @@ def test_no_detail_where_the_preview_is_full_resolution_or_the_view_is_diagnosti
     bare = views.render_detail(ViewRenderer(photo, max_shape=(12, 16)).prepare(), Request(CanvasView.RECOLORED),
                                (0, 10, 0, 10))
     np.testing.assert_array_equal(bare.pixels, to_rgb32(photo)[:10, :10])
+
+
+def test_noise_view_is_the_engines_predicted_sigma(rng):
+    from dataclasses import replace
+
+    from engine.recolor import recolor_variance
+
+    d, photo = make_decomposition(rng, h=24, w=36, k=3)
+    cov = (rng.random((6,) + d.shape) * 1e-4).astype(np.float32)
+    cov[[1, 2, 4]] *= 0.1  # off-diagonal terms (packed (0,1), (0,2), (1,2)) smaller than the variances
+    d = replace(d, covariance=cov)
+    kappa = (2.0, 0.125, 8.0)
+    full = views.render(ViewRenderer(photo, d).prepare(), Request(CanvasView.NOISE, kappa))
+    np.testing.assert_array_equal(full.linear, np.sqrt(recolor_variance(d, kappa)))
+    assert full.note.startswith("predicted σ on the target: mean") and full.scale.lo == 0 < full.scale.hi
+    r = ViewRenderer(photo, d, max_shape=(8, 12)).prepare()  # factor 3: the mean variance of each block
+    small = views.render(r, Request(CanvasView.NOISE, kappa))
+    expected = np.sqrt(area_average(recolor_variance(d, kappa), 3))
+    whole = area_average(d.target.astype(np.float32), 3)
+    pure = (whole == 0) | (whole == 1)  # blocks wholly on or off the target
+    np.testing.assert_allclose(small.linear[pure], expected[pure], rtol=1e-5)
+    label, value = views.readout(r, CanvasView.NOISE, 20, 12, kappa)
+    assert label == "predicted σ"
+    np.testing.assert_allclose(value, np.sqrt(recolor_variance(d, kappa))[12, 20], rtol=1e-6)
+    plain = views.render(ViewRenderer(photo, replace(d, covariance=None)).prepare(), Request(CanvasView.NOISE, kappa))
+    assert plain.banner == views.NO_NOISE_BANNER
+    np.testing.assert_array_equal(plain.pixels, to_rgb32(photo))
