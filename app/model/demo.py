@@ -183,13 +183,18 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
         root.mkdir(parents=True, exist_ok=True)
         session = _session(root, rig_name, rig, saved)
         _prune(root, Path(session.path))
+        decomposition = None
         if session.state.get("status") == "captured":  # a complete earlier start: read, don't re-run
             report(progress, 0, 1, "reading the demo's session")
-            calibration = load_calibration(session)
-            photo = session.read_capture(photograph_name(session))
-            key = decomposition_key(session)
-            decomposition = load_decomposition(session, key)
-        else:
+            try:
+                calibration = load_calibration(session)
+                photo = session.read_capture(photograph_name(session))
+                key = decomposition_key(session)
+                decomposition = load_decomposition(session, key)
+            except (SessionError, InputError):  # made by an older Albedit whose acquisition differs
+                shutil.rmtree(session.path, ignore_errors=True)  # the demo's own cache: built again
+                session = _session(root, rig_name, rig, saved)
+        if decomposition is None:
             calibration = run_calibration(rig, session, progress=_stage(progress, "calibrating"),
                                           should_stop=should_stop)
             result = run_capture(rig, session, [(DEMO_TARGET, targets[DEMO_TARGET])], DEMO_ORDER,

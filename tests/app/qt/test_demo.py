@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +108,26 @@ def test_old_demo_sessions_are_pruned(tmp_path):
     left = sorted(p.name for p in tmp_path.iterdir())
     assert len(left) == KEEP and used.name in left and "demo-cornell-0000000000000002" in left
 
+
+
+def test_a_demo_session_left_by_an_older_acquisition_is_built_again(tmp_path, monkeypatch):
+    """The demo's session is a cache: captures an older Albedit took with other patterns are replaced."""
+    from engine.acquire.emission import Emitter
+
+    current = Emitter._warp
+    with monkeypatch.context() as older:  # an acquisition whose re-emission patterns differ
+        older.setattr(Emitter, "_warp", lambda self, light: current(self, light) * np.float32(0.9))
+        d = open_demo(folder=tmp_path, **RIG)
+        d.rig.close()
+    first = Path(d.session.path)
+    shutil.rmtree(first / "cache")  # its decomposition is recomputed from those captures (as after a format change)
+    d = open_demo(folder=tmp_path, **RIG)  # raised "taken with a different projector pattern" before
+    d.rig.close()
+    assert Path(d.session.path) == first and d.session.state.get("status") == "captured"
+    wall = d.document.by_name("right_wall")
+    truth = d.rig.truth.recolor([(d.rig.targets["right_wall"], DEMO_KAPPA)])
+    ours = recolor(d.document.decomposition, DEMO_KAPPA)
+    assert wall is not None and np.linalg.norm(ours - truth) / np.linalg.norm(truth) < 0.05
 
 _MAIN_SCRIPT = """
 import sys
