@@ -15,7 +15,6 @@ document through the editor, and the document's events update them.
 
 from __future__ import annotations
 
-import html
 import math
 from collections.abc import Callable
 
@@ -171,11 +170,13 @@ class ColourPanel(QWidget):
         self.reference.setToolTip("Open a picture from elsewhere beside the canvas and pick a colour in it")
         self.albedo = QLabel(objectName="colour_albedo")
         self.albedo.setWordWrap(True)
+        self.albedo.setTextFormat(Qt.TextFormat.PlainText)  # engine messages: never read as HTML
         self.albedo_entry = QLineEdit(objectName="colour_albedo_entry")
         self.albedo_entry.setPlaceholderText("albedo R,G,B")
         self.checker = QPushButton("Checker", objectName="colour_checker")
         self.warning = QLabel(objectName="colour_warning")
         self.warning.setWordWrap(True)
+        self.warning.setTextFormat(Qt.TextFormat.PlainText)
 
         top = QHBoxLayout()
         top.addWidget(self.swatch)
@@ -299,7 +300,7 @@ class ColourPanel(QWidget):
         self.value.setText(f"{hexa}  L*a*b* {lab[0]:.0f}, {lab[1]:.0f}, {lab[2]:.0f}")
         self.value.setToolTip(f"The target's direct colour with its κ now (linear R, G, B "
                               f"{', '.join(f'{v:.4g}' for v in linear)}), white-balanced, at the display exposure")
-        self.albedo.setText(html.escape(self.editor.albedo_text(uid)))
+        self.albedo.setText(self.editor.albedo_text(uid))
         absolute = c.albedo is not None
         self.albedo_entry.setEnabled(absolute)
         self.albedo_entry.setToolTip("Type the absolute albedo wanted (e.g. a paint maker's data), below 1" if absolute
@@ -312,7 +313,7 @@ class ColourPanel(QWidget):
 
     def _show_outcome(self, warning: str, *, error: bool = False) -> None:
         self.warning.setStyleSheet("color: #c03030;" if error else "color: #a06000;" if warning else "")
-        self.warning.setText(html.escape(warning))
+        self.warning.setText(warning)
         if warning:
             self.message.emit(warning)
 

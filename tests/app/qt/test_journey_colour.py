@@ -61,7 +61,9 @@ def test_the_artist_picks_colours_on_the_demo(demo, monkeypatch, dialogs, tmp_pa
     assert wall.name == "right_wall" and doc.acquisition.cascade == (wall.uid,)
     engine = target_colour(window.session, doc.decomposition, wall.mask)  # what `albedit recolor` uses
     exposure = user.find("display_exposure", QDoubleSpinBox).value()
-    assert "relative" in user.find("colour_albedo", QLabel).text()
+    albedo = user.find("colour_albedo", QLabel)
+    assert "relative" in albedo.text() and "target's plane" in albedo.text()  # shown as typed, no HTML entities
+    assert albedo.textFormat() == Qt.TextFormat.PlainText
     assert not user.find("colour_albedo_entry").isEnabled()  # no colour checker: albedo is relative
     truth = window.rig.truth.albedo()[wall.mask].mean(axis=0)
 
