@@ -12,7 +12,18 @@ from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import QPointF, QRectF, Qt, Signal
-from PySide6.QtGui import QBrush, QColor, QFont, QImage, QLinearGradient, QMouseEvent, QPainter, QPen, QPolygonF
+from PySide6.QtGui import (
+    QBrush,
+    QColor,
+    QFont,
+    QFontMetrics,
+    QImage,
+    QLinearGradient,
+    QMouseEvent,
+    QPainter,
+    QPen,
+    QPolygonF,
+)
 from PySide6.QtWidgets import QWidget
 
 from app.model.document import Document
@@ -345,7 +356,9 @@ class Canvas(QWidget):
 
     def _draw_scale(self, p: QPainter) -> None:
         s = self.frame.scale
-        w, h = 240, 12
+        font = QFont(self.font())
+        font.setPointSizeF(max(font.pointSizeF() - 1, 7))
+        w, h = max(240, QFontMetrics(font).horizontalAdvance(s.label) + 4), 12  # the whole label fits
         x, y = self.width() - w - 24, self.height() - 58
         p.setPen(Qt.PenStyle.NoPen)
         p.setBrush(QColor(0, 0, 0, 170))
@@ -359,8 +372,6 @@ class Canvas(QWidget):
         p.setBrush(QBrush(grad))
         p.drawRect(QRectF(x, y, w, h))
         p.setPen(QColor(230, 230, 230))
-        font = QFont(self.font())
-        font.setPointSizeF(max(font.pointSizeF() - 1, 7))
         p.setFont(font)
         p.drawText(QRectF(x, y - 20, w, 16), Qt.AlignmentFlag.AlignLeft, s.label)
         lo, hi = f"{s.lo:.3g}", f"{s.hi:.3g}"
