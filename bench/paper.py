@@ -40,6 +40,7 @@ Run: .venv/bin/python bench/paper.py [--resolution 128] [--frames 16] [--seeds 3
 from __future__ import annotations
 
 import argparse
+import itertools
 import platform
 import sys
 import time
@@ -271,7 +272,8 @@ def fig6(bench: Bench, *, order: int = 4, extras: bool = True) -> list[Row]:
         comps = bench.rig.truth.components(bench.mask(name), order, ambient=bench.ambient, pattern=bench.flood)
         ref = Decomposition.from_components(comps.inside, comps.outside[: order - 1], comps.unreached, comps.target)
         keep = ~bench.lamp
-        num = np.linalg.norm((d.components - ref.components)[:, keep]) ** 2 + np.linalg.norm((d.unreached - ref.unreached)[keep]) ** 2
+        num = (np.linalg.norm((d.components - ref.components)[:, keep]) ** 2
+               + np.linalg.norm((d.unreached - ref.unreached)[keep]) ** 2)
         den = np.linalg.norm(ref.components[:, keep]) ** 2 + np.linalg.norm(ref.unreached[keep]) ** 2
         err = float(np.sqrt(num / den))
         rows.append(Row("6", f"components R^i L_d, C R^i L_d, L̄_d (order {order})", bench.label, bench.projector,
@@ -295,8 +297,8 @@ def fig8(bench: Bench, *, orders=(4, 5), adaptive=ADAPTIVE, extras: bool = True)
                               truth, result.images, brute, paper_error, result=result))
         if extras and order == orders[0] and bench.flood is not None:
             d0 = _decomposed(result, unreached_light=False)
-            rows.append(bench.row("8", "  same, decomposed with L̄_d = 0", recolor(d0, KAPPA_RIGHT), truth, result.images,
-                                  note="the flood lights the whole scene: L̄_d ≠ 0"))
+            rows.append(bench.row("8", "  same, decomposed with L̄_d = 0", recolor(d0, KAPPA_RIGHT), truth,
+                                  result.images, note="the flood lights the whole scene: L̄_d ≠ 0"))
         for policy, threshold in adaptive:
             res = bench.acquire(names, order, fixed_kappa=[KAPPA_LEFT], adaptive=Adaptive(policy, threshold))
             rows.append(bench.row("8", f"2 targets, order {order}, adaptive {policy} {threshold:.0%}",
@@ -311,8 +313,8 @@ def fig8(bench: Bench, *, orders=(4, 5), adaptive=ADAPTIVE, extras: bool = True)
         res = bench.acquire([name], order)
         naive += recolor(_decomposed(res), kappa) - res.acquisition.observations[0]
     rows.append(bench.row("8", f"naive per-target (each decomposed alone, order {order})", naive, truth, 2 * order - 1))
-    rows.append(bench.row("8", "naive per-pixel (photo·κ)", naive_per_pixel(photo, [(bench.mask(n), k) for n, k in pairs]),
-                          truth, 1))
+    naive_pixel = naive_per_pixel(photo, [(bench.mask(n), k) for n, k in pairs])
+    rows.append(bench.row("8", "naive per-pixel (photo·κ)", naive_pixel, truth, 1))
     return rows
 
 
@@ -334,7 +336,7 @@ def fig9(bench: Bench, *, order: int = 4) -> list[Row]:
 def fig10(bench: Bench, *, order: int = 4, adaptive=ADAPTIVE, extras: bool = True) -> list[Row]:
     """Three targets red → blue → beige (paper: 1.3 %, 64 images brute force, 38 adaptive)."""
     names = ["red", "blue", "beige"]
-    pairs = list(zip(names, KAPPA_THREE))
+    pairs = list(zip(names, KAPPA_THREE, strict=True))
     truth = bench.truth(pairs)
     fixed = list(KAPPA_THREE[:2])
 
@@ -351,10 +353,11 @@ def fig10(bench: Bench, *, order: int = 4, adaptive=ADAPTIVE, extras: bool = Tru
         return rows
     for low in (3, 2):
         res = bench.acquire(names, low, fixed_kappa=fixed)
-        rows.append(row(res, f"3 targets, order {low}, brute force", 64, "truncation only" if bench.ideal else "fewer orders, less noise"))
+        note = "truncation only" if bench.ideal else "fewer orders, less noise"
+        rows.append(row(res, f"3 targets, order {low}, brute force", 64, note))
     photo = bench.capture_photograph()
-    rows.append(bench.row("10", "naive per-pixel (photo·κ)", naive_per_pixel(photo, [(bench.mask(n), k) for n, k in pairs]),
-                          truth, 1))
+    naive_pixel = naive_per_pixel(photo, [(bench.mask(n), k) for n, k in pairs])
+    rows.append(bench.row("10", "naive per-pixel (photo·κ)", naive_pixel, truth, 1))
     return rows
 
 
@@ -432,7 +435,8 @@ def _dashed(img, a, b, colour, thickness, dash=7):
     n = max(int(np.linalg.norm(q - p) // dash), 1)
     for k in range(0, n, 2):
         s, e = p + (q - p) * k / n, p + (q - p) * min(k + 1, n) / n
-        cv2.line(img, tuple(int(v) for v in np.rint(s)), tuple(int(v) for v in np.rint(e)), colour, thickness, cv2.LINE_AA)
+        start, end = tuple(int(v) for v in np.rint(s)), tuple(int(v) for v in np.rint(e))
+        cv2.line(img, start, end, colour, thickness, cv2.LINE_AA)
 
 
 def plot_fig14(curve: NoiseCurve, path: Path, *, size=(640, 960)) -> None:
@@ -452,10 +456,11 @@ def plot_fig14(curve: NoiseCurve, path: Path, *, size=(640, 960)) -> None:
     ymin, ymax = np.floor(ly.min()), np.ceil(ly.max())
 
     def to_px(x, y):
-        return (int(round(x0 + (x - xmin) / (xmax - xmin) * (x1 - x0))), int(round(y1 - (y - ymin) / (ymax - ymin) * (y1 - y0))))
+        return (int(round(x0 + (x - xmin) / (xmax - xmin) * (x1 - x0))),
+                int(round(y1 - (y - ymin) / (ymax - ymin) * (y1 - y0))))
 
     font, black = cv2.FONT_HERSHEY_SIMPLEX, (0, 0, 0)
-    for level, x in zip(levels, lx):
+    for level, x in zip(levels, lx, strict=True):
         px, _ = to_px(x, ymin)
         cv2.line(img, (px, y0), (px, y1), (225, 225, 225), 1)
         cv2.putText(img, f"{100 * level:g}%", (px - 18, y1 + 20), font, 0.42, black, 1, cv2.LINE_AA)
@@ -464,9 +469,10 @@ def plot_fig14(curve: NoiseCurve, path: Path, *, size=(640, 960)) -> None:
         cv2.line(img, (x0, py), (x1, py), (225, 225, 225), 1)
         cv2.putText(img, f"1e{int(e)}", (x0 - 50, py + 5), font, 0.45, black, 1, cv2.LINE_AA)
     cv2.rectangle(img, (x0, y0), (x1, y1), black, 1)
-    cv2.putText(img, "camera noise: std / peak of each observation", (x0 + 150, h - 22), font, 0.5, black, 1, cv2.LINE_AA)
-    cv2.putText(img, "Fig. 14: mean |error| / peak of the true component, 5th order, Cornell right wall", (x0, 28), font,
-                0.5, black, 1, cv2.LINE_AA)
+    cv2.putText(img, "camera noise: std / peak of each observation", (x0 + 150, h - 22), font, 0.5, black, 1,
+                cv2.LINE_AA)
+    cv2.putText(img, "Fig. 14: mean |error| / peak of the true component, 5th order, Cornell right wall", (x0, 28),
+                font, 0.5, black, 1, cv2.LINE_AA)
     for j, label in enumerate(curve.labels):
         if label.startswith("L"):
             colour, solid, text = black, True, "Lbar_d (unreached)"
@@ -475,8 +481,8 @@ def plot_fig14(curve: NoiseCurve, path: Path, *, size=(640, 960)) -> None:
             colour = _PALETTE[order_i % len(_PALETTE)]
             solid = not label.startswith("C")
             text = ("inside " if solid else "outside ") + label
-        pts = [to_px(x, y) for x, y in zip(lx, ly[:, j])]
-        for a, b in zip(pts[:-1], pts[1:]):
+        pts = [to_px(x, y) for x, y in zip(lx, ly[:, j], strict=True)]
+        for a, b in itertools.pairwise(pts):
             (cv2.line(img, a, b, colour, 2, cv2.LINE_AA) if solid else _dashed(img, a, b, colour, 2))
         for p in pts:
             cv2.circle(img, p, 3, colour, -1, cv2.LINE_AA)
@@ -631,8 +637,9 @@ def table(rows: list[Row]) -> str:
             "| our error, lamp px excluded | vs paper | note |")
     lines = [head, "|" + "---|" * 11]
     for r in rows:
-        lines.append(f"| {r.figure} | {r.case} | {r.rig} | {r.projector} | {_count(r.paper_images)} | {_pct(r.paper_error)} "
-                     f"| {_count(r.images)} | {_pct(r.error)} | {_pct(r.error_no_lamp)} | {r.verdict()} | {r.note} |")
+        lines.append(f"| {r.figure} | {r.case} | {r.rig} | {r.projector} | {_count(r.paper_images)} "
+                     f"| {_pct(r.paper_error)} | {_count(r.images)} | {_pct(r.error)} | {_pct(r.error_no_lamp)} "
+                     f"| {r.verdict()} | {r.note} |")
     return "\n".join(lines)
 
 
@@ -642,14 +649,15 @@ def noise_table(curve: NoiseCurve) -> str:
     lines = [head, "|" + "---|" * (len(curve.labels) + 4)]
     for i, level in enumerate(curve.levels):
         cells = " | ".join(f"{v:.2e}" for v in curve.ordered[i])
-        lines.append(f"| {100 * level:g} % | {cells} | {curve.ordered[i].mean():.2e} | {curve.unconstrained[i].mean():.2e} "
-                     f"| {_pct(curve.direct_relative[i])} |")
+        lines.append(f"| {100 * level:g} % | {cells} | {curve.ordered[i].mean():.2e} "
+                     f"| {curve.unconstrained[i].mean():.2e} | {_pct(curve.direct_relative[i])} |")
     return "\n".join(lines)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--resolution", type=int, default=128, help="camera = projector resolution, square (default %(default)s)")
+    ap.add_argument("--resolution", type=int, default=128,
+                    help="camera = projector resolution, square (default %(default)s)")
     ap.add_argument("--frames", type=int, default=16, help="frames averaged per capture on the realistic rig")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=HERE / "paper_results.md")

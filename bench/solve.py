@@ -79,7 +79,8 @@ def rate(seconds, count):
 def table(h, w, sub):
     rng = np.random.default_rng(0)
     print(f"\nthroughput on {h}x{w} RGB ({h * w * 3 / 1e6:.1f} M pixel-channels); scipy on {sub} columns")
-    print(f"{'K':>2} {'noise':>6} | {'albedit M/s':>11} {'numpy M/s':>10} {'scipy M/s':>10} | {'vs numpy':>8} {'vs scipy':>8}")
+    print(f"{'K':>2} {'noise':>6} | {'albedit M/s':>11} {'numpy M/s':>10} {'scipy M/s':>10} "
+          f"| {'vs numpy':>8} {'vs scipy':>8}")
     decompose(*synthetic_stack(3, 8, 8, noise=0.01, rng=rng))  # compile the kernel once
     for order in (3, 4, 5, 6):
         for noise in (0.0, 0.01):
@@ -96,7 +97,8 @@ def table(h, w, sub):
             t0 = time.perf_counter()
             scipy_per_column(a, basis, cols)
             ref = rate(time.perf_counter() - t0, cols.shape[1])
-            print(f"{order:>2} {noise:>6.0%} | {ours:>11.2f} {vec:>10.2f} {ref:>10.3f} | {ours / vec:>7.1f}x {ours / ref:>7.0f}x")
+            print(f"{order:>2} {noise:>6.0%} | {ours:>11.2f} {vec:>10.2f} {ref:>10.3f} "
+                  f"| {ours / vec:>7.1f}x {ours / ref:>7.0f}x")
 
 
 def weighted_table(h, w):
@@ -150,7 +152,8 @@ def full(megapixels):
     rec = time.perf_counter() - t0
     print(f"\nfull {h}x{w} RGB ({h * w / 1e6:.0f} MP), K = 5, 1 % noise:")
     print(f"  decompose {seconds:.1f} s = {rate(seconds, obs[0].size):.2f} M pixel-channels/s")
-    print(f"  peak memory allocated during decompose {peak / 2**30:.2f} GiB = {peak / obs.nbytes:.2f} x the input stack ({obs.nbytes / 2**30:.2f} GiB)")
+    print(f"  peak memory allocated during decompose {peak / 2**30:.2f} GiB "
+          f"= {peak / obs.nbytes:.2f} x the input stack ({obs.nbytes / 2**30:.2f} GiB)")
     print(f"  recolor {rec:.2f} s")
 
 

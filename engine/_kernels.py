@@ -14,7 +14,9 @@ from numba import njit, prange
 
 
 @njit(parallel=True, cache=True, nogil=True)
-def kkt_columns(b, selector, tests, maps, orders, a, dest, tol, out, extra, residual, unresolved):  # pragma: no cover - compiled
+def kkt_columns(  # pragma: no cover - compiled
+    b, selector, tests, maps, orders, a, dest, tol, out, extra, residual, unresolved
+):
     """Solve every column of ``b`` (m, N) with the system ``selector[j]``.
 
     tests (G, S, n, m), maps (G, S, nx, n), orders (G, S), a (G, m, nx) are float64/int64;
@@ -32,11 +34,16 @@ def kkt_columns(b, selector, tests, maps, orders, a, dest, tol, out, extra, resi
         y = np.empty(n)
         x = np.empty(nx)
         for j in range(c * chunk, min(count, (c + 1) * chunk)):
-            _solve_column(b, j, selector[j], tests, maps, orders, a, dest, tol, out, extra, residual, unresolved, col, y, x, n_sets)
+            _solve_column(
+                b, j, selector[j], tests, maps, orders, a, dest, tol, out, extra, residual, unresolved,
+                col, y, x, n_sets,
+            )
 
 
 @njit(cache=True, inline="always")
-def _solve_column(b, j, g, tests, maps, orders, a, dest, tol, out, extra, residual, unresolved, col, y, x, n_sets):  # pragma: no cover - compiled
+def _solve_column(  # pragma: no cover - compiled
+    b, j, g, tests, maps, orders, a, dest, tol, out, extra, residual, unresolved, col, y, x, n_sets
+):
     m = col.shape[0]
     n = y.shape[0]
     nx = x.shape[0]

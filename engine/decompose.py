@@ -149,7 +149,8 @@ class Decomposition:
     @property
     def shape(self) -> tuple[int, int, int]:
         """``(H, W, C)`` of the photograph."""
-        return tuple(self.components.shape[1:])  # type: ignore[return-value]
+        _, h, w, c = self.components.shape
+        return h, w, c
 
     @property
     def outside_order(self) -> int:

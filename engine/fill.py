@@ -20,7 +20,9 @@ from engine.decompose import Decomposition
 from engine.errors import InputError
 
 
-def fill_unreachable(decomposition: Decomposition, painted, photograph, *, radius: int = 3) -> tuple[Decomposition, np.ndarray]:
+def fill_unreachable(
+    decomposition: Decomposition, painted, photograph, *, radius: int = 3
+) -> tuple[Decomposition, np.ndarray]:
     """Give painted-but-unreachable pixels inside components estimated from their neighbours.
 
     Parameters
@@ -106,14 +108,14 @@ def fill_unreachable(decomposition: Decomposition, painted, photograph, *, radiu
     if residual is not None:
         residual = residual.copy()
         residual[fy, fx] = 0
-    covariance = decomposition.covariance
-    if covariance is not None:
+    covariance = original = decomposition.covariance
+    if original is not None:
         # a hole is inside the target now: its unknowns are R^i L_d, the neighbours' order
-        covariance = covariance.copy()
+        covariance = original.copy()
         safe2 = np.square(safe)
         count = count[vy, vx][:, None]
         for p in range(covariance.shape[0]):
-            ratio = np.where(valid[:, :, None], decomposition.covariance[p, rows, cols] / safe2, 0).astype(np.float32)
+            ratio = np.where(valid[:, :, None], original[p, rows, cols] / safe2, 0).astype(np.float32)
             mean = cv2.boxFilter(ratio, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)[vy, vx] / count
             covariance[p, fy, fx] = (np.square(light[vy, vx]) * mean).astype(covariance.dtype)
     result = Decomposition(components, unreached, reach | filled, decomposition.constraint,

@@ -183,6 +183,7 @@ def fit_camera_noise(stacks, exposure: float, *, saturated=None, bins: int = 32)
         variances.append(s.var(axis=0, ddof=1, dtype=np.float64))
     if not means:
         raise InputError("stacks is empty: give repeated frames of at least one lighting")
+    assert shape is not None  # set by the first stack, and there is at least one
     keep = np.ones(shape[:2], bool) if saturated is None else ~np.asarray(saturated, bool)
     mean = np.stack(means)[:, keep]  # (L, n, 3)
     var = np.stack(variances)[:, keep]
@@ -206,7 +207,7 @@ def fit_camera_noise(stacks, exposure: float, *, saturated=None, bins: int = 32)
             slope = max(float(np.sum(w * bm * bv) / max(np.sum(w * bm * bm), 1e-300)), 0.0)
             icpt = max(float(np.sum(w * (bv - slope * bm)) / np.sum(w)), 0.0)
         shot[c], read[c] = slope, icpt
-    return CameraNoise(tuple(shot), tuple(read), float(exposure))
+    return CameraNoise((shot[0], shot[1], shot[2]), (read[0], read[1], read[2]), float(exposure))
 
 
 def frame_variance(image, exposure: float, metadata, fallback: CameraNoise | None) -> np.ndarray | None:

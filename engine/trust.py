@@ -334,6 +334,7 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
     """Smooth one decomposition's shares in each region and channel."""
     k, h, w, c = d.components.shape
     n = k - 1
+    assert d.covariance is not None  # prepare_trust refuses decompositions without one
     cov = unpack_covariance(d.covariance).astype(np.float64)
     unknowns = _unknowns(d)
     fit = unknowns.sum(axis=0)
@@ -350,7 +351,9 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
             # pixels with no light carry no share: they take their neighbours' smoothed shares
             lit = region & (light > 1e-6 * max(float(np.max(np.where(region, light, 0))), 1e-300))
             denom = np.where(lit, light, 1.0)
-            est, var, neff = [], [], []
+            est: list[np.ndarray] = []
+            var: list[np.ndarray] = []
+            neff: list[np.ndarray] = []
             for j in range(1, k):
                 s = np.where(lit, unknowns[j, ..., ch] / denom, 0.0)
                 v = np.where(lit, np.minimum(cov[j, j, ..., ch] / denom**2, UNKNOWN), np.inf)
@@ -563,11 +566,14 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
         if best_score is None:
             best_score, best_est, best_var, best_mse = score, est, var, mse
         else:
+            assert best_est is not None and best_var is not None and best_mse is not None  # set with best_score
             better = score < best_score
             best_score = np.where(better, score, best_score)
             best_est = np.where(better, est, best_est)
             best_var = np.where(better, var, best_var)
             best_mse = np.where(better, mse, best_mse)
+    # prepare_trust checks that radii is not empty (it starts at 0): the loop ran at least once
+    assert best_est is not None and best_var is not None and best_mse is not None
     # pixels without a share of their own take the widest window's estimate of their neighbours
     best_est = np.where(ok, best_est, est)
     best_var = np.where(ok, best_var, var)

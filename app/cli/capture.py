@@ -25,7 +25,8 @@ from engine.workflow import (
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("session", type=Path, help="a calibrated session folder (`albedit calibrate`), or a new one with --calibration")
+    parser.add_argument("session", type=Path,
+                        help="a calibrated session folder (`albedit calibrate`), or a new one with --calibration")
     parser.add_argument("--calibration", type=Path, default=None, metavar="SESSION",
                         help="re-use the calibration of another session of the same rig (refused if the rig differs)")
     add_rig_options(parser)
@@ -62,7 +63,8 @@ def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
         elif name in rig.targets:
             mask = rig.targets[name]
         else:
-            raise InputError(f"target {name!r} is not one of the rig's targets {sorted(rig.targets)}; give NAME=MASK.png")
+            raise InputError(f"target {name!r} is not one of the rig's targets {sorted(rig.targets)}; "
+                             "give NAME=MASK.png")
         out.append((name, mask))
     return out
 
@@ -87,7 +89,8 @@ def run(args) -> int:
             rig, session, targets, args.order,
             fixed_kappa=args.fixed_kappa,
             settings=CaptureSettings(per_channel=not args.rgb),
-            adaptive=Adaptive(args.adaptive, args.threshold) if args.adaptive != "brute" or args.order == "auto" else None,
+            adaptive=(Adaptive(args.adaptive, args.threshold)
+                      if args.adaptive != "brute" or args.order == "auto" else None),
             photograph_pattern=flood,
             frames=args.frames,
             progress=ProgressBar(),

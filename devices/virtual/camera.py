@@ -45,7 +45,9 @@ class CameraModel:
 
     Examples
     --------
-    >>> CameraModel.perfect().develop(CameraModel.perfect().expose(np.ones((1, 1, 3)), 0.1, 1.0, None)[0], 0.1, 1.0)[0, 0].tolist()
+    >>> perfect = CameraModel.perfect()
+    >>> raw = perfect.expose(np.ones((1, 1, 3)), 0.1, 1.0, None)[0]
+    >>> perfect.develop(raw, 0.1, 1.0)[0, 0].tolist()
     [1.0, 1.0, 1.0]
     """
 
@@ -120,6 +122,8 @@ class CameraModel:
             raw = np.minimum(electrons, np.float32(self.full_well))
             raw *= np.float32(gain / self.electrons_per_dn)
             return raw, _any_channel(clipped)
+        if rng is None:
+            raise ValueError("a noisy camera model needs an rng (only an ideal model exposes without one)")
         # photon noise: Poisson; above GAUSSIAN_ABOVE electrons its Gaussian limit N(l, l)
         # (skewness < 3 %), drawn together with the read noise
         noise = rng.standard_normal(electrons.shape, dtype=np.float32)
@@ -275,6 +279,8 @@ class VirtualCamera:
             return self.rng
         words = np.frombuffer(hashlib.sha256(identity.encode()).digest(), np.uint32)
         seed = self.rng.bit_generator.seed_seq
+        # default_rng(seed) and every Generator of the rig factories carry a SeedSequence
+        assert isinstance(seed, np.random.SeedSequence), "the rig's rng must come from a seed"
         return np.random.default_rng(np.random.SeedSequence(seed.entropy, spawn_key=(*seed.spawn_key, *words)))
 
     def __repr__(self) -> str:

@@ -16,7 +16,6 @@ on the same target (:mod:`engine.acquire.predict`).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 
@@ -75,19 +74,20 @@ class _Sequence:
         self.trusted = False
 
 
-class _Measured(NamedTuple):
+@dataclass(frozen=True, eq=False)
+class _Measured:
     """An image of the plan and its noise (None when the camera's noise is unknown)."""
 
     image: np.ndarray
     noise: Noise | None
 
     def __add__(self, other: _Measured) -> _Measured:
-        both = self.noise is not None and other.noise is not None
-        return _Measured(self.image + other.image, self.noise + other.noise if both else None)
+        noise = self.noise + other.noise if self.noise is not None and other.noise is not None else None
+        return _Measured(self.image + other.image, noise)
 
     def __sub__(self, other: _Measured) -> _Measured:
-        both = self.noise is not None and other.noise is not None
-        return _Measured(self.image - other.image, self.noise - other.noise if both else None)
+        noise = self.noise - other.noise if self.noise is not None and other.noise is not None else None
+        return _Measured(self.image - other.image, noise)
 
 
 class _Plan:
@@ -150,6 +150,7 @@ class _Plan:
             use_guess, reason = True, "the sequence's prediction was validated"
         saves = self.order**level  # images a prediction at this level replaces
         if use_guess:
+            assert guess is not None  # use_guess is only ever set from a guess
             self.log.append({"path": path, "target": target, "level": level, "source": "predicted",
                              "captures": [], "bound": guess.bound, "images": saves, "reason": reason})
             noise = guess.noise
@@ -243,16 +244,17 @@ class _Plan:
         t = level - 1
         obs = self.observations(t, t, lighting, path)
         stack = np.stack([o.image for o in obs]).astype(np.float32)
-        if any(o.noise is None for o in obs) or len(obs) < 2:
+        noises = [o.noise for o in obs if o.noise is not None]
+        if len(noises) < len(obs) or len(obs) < 2:
             image = recolor(self.prepared[t].decompose(stack), self.kappas[t])
             return _Measured(image, None)
-        covariance = covariance_stack([o.noise for o in obs], stack.shape[1:])
+        covariance = covariance_stack(noises, stack.shape[1:])
         result = recolor_trusted(self.prepared[t].trust(stack, covariance), self.kappas[t])
         photo = stack[0].astype(np.float64)
         lit = np.abs(photo) > 1e-6 * max(float(np.abs(photo).max()), 1e-30)
         scale = np.divide(result.image, photo, out=np.zeros_like(photo), where=lit)
-        carried = obs[0].noise * scale.astype(np.float32)
-        rest = np.maximum(np.square(result.sigma.astype(np.float64)) - np.square(scale) * obs[0].noise.variance(), 0)
+        carried = noises[0] * scale.astype(np.float32)
+        rest = np.maximum(np.square(result.sigma.astype(np.float64)) - np.square(scale) * noises[0].variance(), 0)
         noise = carried + Noise.fresh(np.sqrt(rest).astype(np.float32), "recolored")
         return _Measured(result.image, noise.merged(self.shared))
 
@@ -272,6 +274,10 @@ def capture_stem(target: str, mask) -> str:
     return target if NAME.fullmatch(target) and len(target) <= 64 else mask_name(target, mask_digest(mask))
 
 
+# CaptureSettings is frozen: one shared default instance is safe
+_DEFAULT_SETTINGS = CaptureSettings()
+
+
 def acquire_cascade(
     recorder: Recorder,
     calibration: Calibration,
@@ -279,7 +285,7 @@ def acquire_cascade(
     order: int,
     *,
     fixed_kappa=(),
-    settings: CaptureSettings = CaptureSettings(),
+    settings: CaptureSettings = _DEFAULT_SETTINGS,
     adaptive: Adaptive | None = None,
     photograph_pattern: np.ndarray | None = None,
     prepared=None,
@@ -337,6 +343,8 @@ def acquire_cascade(
         raise InputError(
             f"fixed_kappa must give the κ of every target but the last ({len(targets) - 1}), got {len(fixed_kappa)}"
         )
+    if prepared is not None and len(prepared) != len(targets):
+        raise InputError(f"prepared must give one PreparedTarget per target ({len(targets)}), got {len(prepared)}")
     kappas = [check_kappa(kap, 3, name=f"fixed_kappa[{i}]") for i, kap in enumerate(fixed_kappa)]
     total = np.zeros(calibration.camera_resolution, np.float64)
     for _, m in targets:  # hard masks count 1 per pixel; soft masks their coverage
@@ -350,10 +358,12 @@ def acquire_cascade(
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))
     adaptive = adaptive or Adaptive(Policy.BRUTE)
     if auto and Policy(adaptive.policy) is not Policy.BRUTE:
-        raise InputError('order="auto" captures every observation; give adaptive=None or a brute policy with a threshold')
+        raise InputError('order="auto" captures every observation; '
+                         "give adaptive=None or a brute policy with a threshold")
     t_count = len(targets)
     d_cost = 0 if prepared is not None else t_count * pattern_budget(True)
-    recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + (k**t_count - 1) * settings.captures_per_step()
+    re_emissions = (k**t_count - 1) * settings.captures_per_step()
+    recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + re_emissions
     if recorder.noise is None and calibration.noise is not None:
         recorder.noise = calibration.noise
     photo_pattern = recorder.black() if photograph_pattern is None else np.asarray(photograph_pattern, np.float32)
@@ -374,8 +384,9 @@ def acquire_cascade(
     measured = plan.observations(last, last, None, "", auto=auto)
     obs = np.stack([m.image for m in measured]).astype(np.float32)
     covariance = None
-    if all(m.noise is not None for m in measured):
-        covariance = covariance_stack([m.noise for m in measured], obs.shape[1:])
+    noises = [m.noise for m in measured if m.noise is not None]
+    if len(noises) == len(measured):
+        covariance = covariance_stack(noises, obs.shape[1:])
     captured = [e for e in plan.log if e["source"] == "captured"]
     predicted = sum(e["images"] for e in plan.log if e["source"] == "predicted")
     acq_log = [{"index": 0, "source": "photograph", "captures": [f"{prefix}-photograph"]}] + [
@@ -387,7 +398,7 @@ def acquire_cascade(
     report(recorder.progress, recorder.count, recorder.planned, "acquisition done")
     return CascadeResult(
         acquisition=acquisition,
-        targets=list(zip(names, prepared)),
+        targets=list(zip(names, prepared, strict=True)),
         fixed_kappa=[kap.tolist() for kap in kappas],
         images=1 + len(captured),
         predicted=predicted,
@@ -434,7 +445,7 @@ def acquire_single(
     target,
     order: int,
     *,
-    settings: CaptureSettings = CaptureSettings(),
+    settings: CaptureSettings = _DEFAULT_SETTINGS,
     photograph_pattern: np.ndarray | None = None,
     prepared: PreparedTarget | None = None,
     adaptive=None,

@@ -229,7 +229,7 @@ class Emitter:
             The light present without emission (removed from every capture).
         """
         out = np.zeros(base.shape, np.float32)
-        for em, cap in zip(emissions, captures):
+        for em, cap in zip(emissions, captures, strict=True):
             ch = list(em.channels)
             out[..., ch] += (em.sign / em.scale) * (cap[..., ch] - base[..., ch])
         return out

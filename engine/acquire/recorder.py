@@ -12,6 +12,7 @@ value does not depend on the exposure it was read at.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -70,7 +71,7 @@ class Recorder:
     session: Session | None = None
     progress: Progress | None = None
     should_stop: ShouldStop | None = None
-    on_capture: object = None
+    on_capture: Callable[[str, np.ndarray], object] | None = None
     frames: int = 1
     brackets: int = 3
     bracket_step: float = 8.0
@@ -167,11 +168,13 @@ class Recorder:
             return self._frame(f"{identity}|0")
         shots = [self._frame(f"{identity}|{i}") for i in range(self.frames)]
         first = shots[0]
-        image = np.mean([np.asarray(f.image, np.float32) for f in shots], axis=0, dtype=np.float64).astype(np.float32)
+        image = np.stack([np.asarray(f.image, np.float32) for f in shots]).mean(axis=0, dtype=np.float64)
+        image = image.astype(np.float32)
         saturated = np.logical_or.reduce([np.asarray(f.saturated, bool) for f in shots])
         meta = dict(getattr(first, "metadata", {}) or {})
         meta["frames"] = self.frames
-        return Frame(image, first.exposure, getattr(first, "gain", 1.0), getattr(first, "black_level", 0.0), saturated, meta)
+        return Frame(image, first.exposure, getattr(first, "gain", 1.0), getattr(first, "black_level", 0.0),
+                     saturated, meta)
 
     def _bracketed(self, frame, identity: str):
         """Complete the frame's saturated pixels from shorter exposures (same projector image)."""
@@ -204,7 +207,8 @@ class Recorder:
         meta["brackets"] = used
         if refused is not None:
             meta["bracketing_refused"] = refused
-        return Frame(image, frame.exposure, getattr(frame, "gain", 1.0), getattr(frame, "black_level", 0.0), saturated, meta)
+        return Frame(image, frame.exposure, getattr(frame, "gain", 1.0), getattr(frame, "black_level", 0.0),
+                     saturated, meta)
 
     def black(self) -> np.ndarray:
         """A black projector image of the rig's projector resolution."""

@@ -81,8 +81,10 @@ def calibrate_rig(
         The recorder's ``should_stop`` fired; finished captures stay in the session.
     """
     rig = recorder.rig
-    cam_res = tuple(rig.camera.resolution)
-    proj_res = tuple(rig.projector.resolution)
+    cam_h, cam_w = rig.camera.resolution  # (H, W) of both devices
+    cam_res = (int(cam_h), int(cam_w))
+    proj_h, proj_w = rig.projector.resolution
+    proj_res = (int(proj_h), int(proj_w))
     lv = ramp_levels(levels)  # checked before the first capture
     recorder.planned = calibration_budget(proj_res, levels=levels, crosstalk=crosstalk)
     black = recorder.capture("cal-black", recorder.black(), meta={"kind": "calibration"})
@@ -98,13 +100,15 @@ def calibrate_rig(
     gray_caps = [recorder.capture(f"cal-gray-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(gray)]
     corr = decode_gray_code(gray_caps, proj_res)
     if not corr.valid.any():
-        raise InputError("no camera pixel decoded the Gray code: check focus, exposure and that the projector lights the scene")
+        raise InputError("no camera pixel decoded the Gray code: "
+                         "check focus, exposure and that the projector lights the scene")
     ramp = [recorder.capture(f"cal-ramp-{i:03d}", p, meta={"kind": "calibration"})
             for i, p in enumerate(response_patterns(lv, proj_res, channels="separate"))]
     response = fit_response(np.stack(ramp), lv, channels="separate", mask=corr.valid)
     xtalk = None
     if crosstalk:
-        prim = [recorder.capture(f"cal-primary-{i}", p, meta={"kind": "calibration"}) for i, p in enumerate(crosstalk_patterns(proj_res))]
+        prim = [recorder.capture(f"cal-primary-{i}", p, meta={"kind": "calibration"})
+                for i, p in enumerate(crosstalk_patterns(proj_res))]
         xtalk = fit_crosstalk(np.stack(prim), black=black, mask=corr.valid)
     return Calibration(
         rig_name=rig_name,

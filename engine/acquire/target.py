@@ -199,7 +199,8 @@ def prepare_target(
             "(check the Gray-code coverage map)"
         )
     footprint = projector_footprint(corr, target=painted_valid)
-    patterns = high_frequency_patterns(calibration.projector_resolution, mask_projector=footprint, period=period, shifts=shifts)
+    patterns = high_frequency_patterns(calibration.projector_resolution, mask_projector=footprint, period=period,
+                                       shifts=shifts)
     lit_full, unlit_full = _neighbourhood_states(patterns, corr, painted_valid, footprint)
     groups = [(c,) for c in range(3)] if per_channel else [(0, 1, 2)]
     # matrix[..., c, g]: camera channel c's direct light per unit of primary group g
@@ -243,14 +244,15 @@ def prepare_target(
     # a wrong correspondence mixes lit and unlit captures: its D falls far below max - min
     consistent = (direct >= consistency * (brightest - darkest)).all(axis=-1)
     med = np.median(direct[painted_valid], axis=0)
-    usable = painted_valid & consistent & (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
+    strong = (direct >= floor * np.maximum(med, 1e-30)).all(axis=-1) & (direct > 0).all(axis=-1)
+    usable = painted_valid & consistent & strong
     if not usable.any():
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
-    matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
-    variance = np.where(usable[:, :, None], variance, 0).astype(np.float32) if known else None
-    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), matrix, variance,
-                          coverage)
+    direct_matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
+    direct_variance = np.where(usable[:, :, None], variance, 0).astype(np.float32) if known else None
+    return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), direct_matrix,
+                          direct_variance, coverage)
 
 
 def _conflicts(corr: Correspondence, target: np.ndarray, *, distance: float = 0.0, margin: int = 0) -> np.ndarray:
@@ -288,7 +290,9 @@ def _conflicts(corr: Correspondence, target: np.ndarray, *, distance: float = 0.
     return out
 
 
-def _neighbourhood_states(patterns, corr: Correspondence, mask: np.ndarray, footprint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _neighbourhood_states(
+    patterns, corr: Correspondence, mask: np.ndarray, footprint: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Per pattern and camera pixel: was the pixel's 3×3 projector neighbourhood all lit / all unlit?
 
     Neighbours outside the target's footprint are never lit; they do not prevent "all lit"

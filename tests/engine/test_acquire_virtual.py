@@ -30,7 +30,8 @@ def rig(cache):
 
 
 def _session(path, rig):
-    return Session.create(path, rig_name=rig.name, camera_resolution=rig.camera.resolution, projector_resolution=rig.projector.resolution)
+    return Session.create(path, rig_name=rig.name, camera_resolution=rig.camera.resolution,
+                          projector_resolution=rig.projector.resolution)
 
 
 def _error(image, truth):
