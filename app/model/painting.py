@@ -95,29 +95,16 @@ def capsule(p0: tuple[float, float], p1: tuple[float, float], radius: float, sha
            [1, 1, 1],
            [0, 1, 0]])
     """
-    (ax, ay), (bx, by) = p0, p1
-    h, w = shape
-    y0 = max(int(np.floor(min(ay, by) - radius)), 0)
-    y1 = min(int(np.floor(max(ay, by) + radius)) + 1, h)
-    x0 = max(int(np.floor(min(ax, bx) - radius)), 0)
-    x1 = min(int(np.floor(max(ax, bx) + radius)) + 1, w)
-    if y0 >= y1 or x0 >= x1:
+    bbox, dist = _segment_distance(p0, p1, radius, shape)
+    if bbox is None:
         return None, None
-    yy = (np.arange(y0, y1, dtype=np.float64) + 0.5)[:, None]
-    xx = (np.arange(x0, x1, dtype=np.float64) + 0.5)[None, :]
-    dx, dy = bx - ax, by - ay
-    seg2 = dx * dx + dy * dy
-    if seg2 > 0:
-        t = np.clip(((xx - ax) * dx + (yy - ay) * dy) / seg2, 0.0, 1.0)
-    else:
-        t = np.zeros((1, 1))
-    ex, ey = xx - (ax + t * dx), yy - (ay + t * dy)
-    stamp = ex * ex + ey * ey <= radius * radius
+    stamp = dist * dist <= radius * radius
+    y0, y1, x0, x1 = bbox
     for px, py in (p0, p1):  # a brush always paints the pixel under the cursor
         j, i = int(np.floor(px)) - x0, int(np.floor(py)) - y0
         if 0 <= i < y1 - y0 and 0 <= j < x1 - x0:
             stamp[i, j] = True
-    return (y0, y1, x0, x1), stamp
+    return bbox, stamp
 
 
 def feathered_capsule(p0: tuple[float, float], p1: tuple[float, float], radius: float, hardness: float,
@@ -150,6 +137,17 @@ def feathered_capsule(p0: tuple[float, float], p1: tuple[float, float], radius: 
     >>> float(w[1, 1])  # distance √2 from the centre: (2 − √2) / (2 − 1)
     0.5857864...
     """
+    bbox, dist = _segment_distance(p0, p1, radius, shape)
+    if bbox is None:
+        return None, None
+    inner = hardness * radius
+    weight = np.clip((radius - dist) / max(radius - inner, 1e-9), 0.0, 1.0)
+    return bbox, weight.astype(np.float32)
+
+
+def _segment_distance(p0, p1, radius: float, shape: tuple[int, int]):
+    """The box of pixels within ``radius`` of the segment p0–p1 (clipped to ``shape``) and each
+    pixel centre's distance to the segment; ``(None, None)`` when the box misses the image."""
     (ax, ay), (bx, by) = p0, p1
     h, w = shape
     y0 = max(int(np.floor(min(ay, by) - radius)), 0)
@@ -163,10 +161,7 @@ def feathered_capsule(p0: tuple[float, float], p1: tuple[float, float], radius: 
     dx, dy = bx - ax, by - ay
     seg2 = dx * dx + dy * dy
     t = np.clip(((xx - ax) * dx + (yy - ay) * dy) / seg2, 0.0, 1.0) if seg2 > 0 else np.zeros((1, 1))
-    dist = np.hypot(xx - (ax + t * dx), yy - (ay + t * dy))
-    inner = hardness * radius
-    weight = np.clip((radius - dist) / max(radius - inner, 1e-9), 0.0, 1.0)
-    return (y0, y1, x0, x1), weight.astype(np.float32)
+    return (y0, y1, x0, x1), np.hypot(xx - (ax + t * dx), yy - (ay + t * dy))
 
 
 def polygon_mask(points, shape: tuple[int, int]):
