@@ -366,6 +366,40 @@ def _lstsq_free(g, h, free, d, rinv, q, y, v, rr):  # pragma: no cover - compile
 
 
 @njit(cache=True)
+def _settle(g, h, d, s, free, rinv, q, y, v, rr):  # pragma: no cover - compiled
+    """The inner loop of Lawson–Hanson: solve on the passive (free) set; while that solution
+    leaves it, step from ``d`` toward it as far as stays feasible and drop the variables that
+    reach zero. Ends with ``d`` the feasible solution on the final free set (0 elsewhere)."""
+    n = g.shape[1]
+    for _inner in range(3 * n + 3):
+        anyfree = False
+        for k in range(n):
+            anyfree = anyfree or free[k]
+        if not anyfree:
+            return
+        _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
+        ok = True
+        for k in range(n):
+            if free[k] and s[k] <= 0:
+                ok = False
+        if ok:
+            for k in range(n):
+                d[k] = s[k]
+            return
+        alpha = 1.0
+        for k in range(n):
+            if free[k] and s[k] <= 0:
+                step = d[k] / (d[k] - s[k]) if d[k] - s[k] != 0 else 0.0
+                if step < alpha:
+                    alpha = step
+        for k in range(n):
+            d[k] = d[k] + alpha * (s[k] - d[k]) if free[k] else 0.0
+            if free[k] and d[k] <= 0:
+                free[k] = False
+                d[k] = 0.0
+
+
+@njit(cache=True)
 def _nnls(g, h, d, s, w, free, rinv, q, y, v, rr, tol):  # pragma: no cover - compiled
     """Lawson–Hanson non-negative least squares of ``g d = h`` (n ≤ a few dozen).
 
@@ -377,33 +411,7 @@ def _nnls(g, h, d, s, w, free, rinv, q, y, v, rr, tol):  # pragma: no cover - co
         free[k] = d[k] > 0.0
         if not free[k]:
             d[k] = 0.0
-    if n > 0:  # settle the starting passive set first (inner loop of Lawson–Hanson)
-        for _inner in range(3 * n + 3):
-            anyfree = False
-            for k in range(n):
-                anyfree = anyfree or free[k]
-            if not anyfree:
-                break
-            _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
-            ok = True
-            for k in range(n):
-                if free[k] and s[k] <= 0:
-                    ok = False
-            if ok:
-                for k in range(n):
-                    d[k] = s[k]
-                break
-            alpha = 1.0
-            for k in range(n):
-                if free[k] and s[k] <= 0:
-                    step = d[k] / (d[k] - s[k]) if d[k] - s[k] != 0 else 0.0
-                    if step < alpha:
-                        alpha = step
-            for k in range(n):
-                d[k] = d[k] + alpha * (s[k] - d[k]) if free[k] else 0.0
-                if free[k] and d[k] <= 0:
-                    free[k] = False
-                    d[k] = 0.0
+    _settle(g, h, d, s, free, rinv, q, y, v, rr)  # the starting passive set first
     scale = 0.0
     for r in range(m):
         scale += h[r] * h[r]
@@ -430,27 +438,7 @@ def _nnls(g, h, d, s, w, free, rinv, q, y, v, rr, tol):  # pragma: no cover - co
         if arg < 0:
             break
         free[arg] = True
-        for _inner in range(3 * n + 3):
-            _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
-            ok = True
-            for k in range(n):
-                if free[k] and s[k] <= 0:
-                    ok = False
-            if ok:
-                for k in range(n):
-                    d[k] = s[k]
-                break
-            alpha = 1.0
-            for k in range(n):
-                if free[k] and s[k] <= 0:
-                    step = d[k] / (d[k] - s[k]) if d[k] - s[k] != 0 else 0.0
-                    if step < alpha:
-                        alpha = step
-            for k in range(n):
-                d[k] = d[k] + alpha * (s[k] - d[k]) if free[k] else 0.0
-                if free[k] and d[k] <= 0:
-                    free[k] = False
-                    d[k] = 0.0
+        _settle(g, h, d, s, free, rinv, q, y, v, rr)
     # R⁻¹ of the final free set (the covariance's factor), d on it
     _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
     for k in range(n):
