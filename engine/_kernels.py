@@ -158,25 +158,7 @@ def _gls_column(b, cov, j, s, a, basis, inverse, ainv, pinv, constrained, dest, 
         if constrained[s] and acc < -tol * scale:
             feasible = False
     if feasible:
-        # x = A⁻¹ b, Cov x = A⁻¹ Σ A⁻ᵀ: t = A⁻¹ Σ, then t A⁻ᵀ
-        for i in range(n):
-            acc = 0.0
-            for r in range(m):
-                acc += ainv[s, i, r] * col[r]
-            x[i] = acc
-            for r in range(m):
-                acc = 0.0
-                for q2 in range(m):
-                    acc += ainv[s, i, q2] * sig[q2, r]
-                t[i, r] = acc
-        p = 0
-        for i in range(n):
-            for k in range(i, n):
-                acc = 0.0
-                for r in range(m):
-                    acc += t[i, r] * ainv[s, k, r]
-                cov_out[p, j] = acc
-                p += 1
+        _map(ainv[s], col, sig, x, t, cov_out, j)  # x = A⁻¹ b, Cov x = A⁻¹ Σ A⁻ᵀ
         _write(j, s, a, dest, out, extra, residual, x, col)
         return
     # Cholesky of the column's covariance (a relative ridge keeps it positive definite)
@@ -255,27 +237,33 @@ def _gls_column(b, cov, j, s, a, basis, inverse, ainv, pinv, constrained, dest, 
 @njit(cache=True)
 def _finish(j, s, a, basis, dest, out, extra, cov_out, residual, d, cd, x, t, col):  # pragma: no cover - compiled
     """x = P d and its packed covariance P cov(d) Pᵀ, then :func:`_write`."""
-    n = d.shape[0]
+    _map(basis[s], d, cd, x, t, cov_out, j)
+    _write(j, s, a, dest, out, extra, residual, x, col)
+
+
+@njit(cache=True)
+def _map(mat, vec, cov, x, t, cov_out, j):  # pragma: no cover - compiled
+    """``x = mat vec`` and column ``j`` of ``cov_out`` = the packed upper triangle of
+    ``mat cov matᵀ`` (``t`` receives ``mat cov``): a linear map of an estimate and its covariance."""
+    n, m = mat.shape
     for i in range(n):
         acc = 0.0
-        for k in range(n):
-            acc += basis[s, i, k] * d[k]
+        for r in range(m):
+            acc += mat[i, r] * vec[r]
         x[i] = acc
-    for i in range(n):
-        for k in range(n):
+        for r in range(m):
             acc = 0.0
-            for q2 in range(n):
-                acc += basis[s, i, q2] * cd[q2, k]
-            t[i, k] = acc
+            for q2 in range(m):
+                acc += mat[i, q2] * cov[q2, r]
+            t[i, r] = acc
     p = 0
     for i in range(n):
         for k in range(i, n):
             acc = 0.0
-            for q2 in range(n):
-                acc += t[i, q2] * basis[s, k, q2]
+            for r in range(m):
+                acc += t[i, r] * mat[k, r]
             cov_out[p, j] = acc
             p += 1
-    _write(j, s, a, dest, out, extra, residual, x, col)
 
 
 @njit(cache=True)
