@@ -8,11 +8,12 @@ must refuse further calls until it finishes (see :class:`Watchdog`).
 
 from __future__ import annotations
 
+import os
 import threading
 from collections.abc import Callable
 from typing import Any
 
-from engine.errors import DeviceError
+from engine.errors import DeviceError, InputError
 
 
 class DeviceTimeout(DeviceError):
@@ -101,3 +102,12 @@ def call_with_timeout(fn: Callable[..., Any], *args: Any, timeout: float, what: 
     return Watchdog(device).call(fn, *args, timeout=timeout, what=what)
 
 
+def cache_folder(option, default: Callable[[], Any]):
+    """A simulated rig's ``cache_dir`` option: a path, None (``default()``) or False (no cache)."""
+    if option is None:
+        return default()
+    if option is False:
+        return None
+    if not isinstance(option, (str, os.PathLike)):
+        raise InputError(f"cache_dir must be a path, None or False, got {option!r}")
+    return option

@@ -80,6 +80,24 @@ def check_kappa(kappa, channels: int, *, name: str = "kappa") -> np.ndarray:
     return k
 
 
+
+def check_kappa_pairs(pairs, shape: tuple[int, int]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Check ``(mask, kappa)`` pairs: (H, W) bool masks of ``shape`` and (3,) kappas.
+
+    Raises
+    ------
+    InputError
+        An item that is not a pair, a bad mask or a bad kappa (the message names its index).
+    """
+    out = []
+    for k, pair in enumerate(pairs):
+        try:
+            mask, kappa = pair
+        except (TypeError, ValueError):
+            raise InputError(f"pairs[{k}] must be a (mask, kappa) pair, got {type(pair).__name__}") from None
+        out.append((check_mask(f"pairs[{k}] mask", mask, shape), check_kappa(kappa, 3, name=f"pairs[{k}] kappa")))
+    return out
+
 def check_order(order: int, *, name: str = "order", minimum: int = 1) -> int:
     """Check a decomposition order K (number of interaction components)."""
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)):

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from devices._common import cache_folder
 from devices.base import Frame, SimulatedRig
 from devices.registry import Availability
 from devices.virtual.camera import CameraModel, VirtualCamera
@@ -181,13 +182,7 @@ def open_rig(arg: str, **options) -> MitsubaRig:
             if not materials:
                 raise InputError(f"{key}= needs a rig scene with a glossy coat; {rig_scene.name!r} has none")
             materials = {sid: check_coat(dict(m, **{key: options[key]}), key) for sid, m in materials.items()}
-    cache = options.get("cache_dir", None)
-    if cache is None:
-        cache = default_cache_dir()
-    elif cache is False:
-        cache = None
-    elif not isinstance(cache, (str, os.PathLike)):
-        raise InputError(f"cache_dir must be a path, None or False, got {cache!r}")
+    cache = cache_folder(options.get("cache_dir", None), default_cache_dir)
 
     renderer = Renderer(
         rig_scene,

@@ -15,7 +15,7 @@ import numpy as np
 from devices.mitsuba.render import TRUTH_SEEDS, Renderer, mitsuba
 from devices.virtual.camera import CameraModel
 from devices.virtual.projector import ProjectorModel, check_pattern
-from engine.checks import check_kappa, check_mask
+from engine.checks import check_kappa_pairs, check_mask
 from engine.errors import InputError
 
 
@@ -112,13 +112,7 @@ class Truth:
             Bad masks or kappas, or a mask that covers no shape.
         """
         factors: dict[str, np.ndarray] = {}
-        for k, pair in enumerate(pairs):
-            try:
-                mask, kappa = pair
-            except (TypeError, ValueError):
-                raise InputError(f"pairs[{k}] must be a (mask, kappa) pair, got {type(pair).__name__}") from None
-            mask = check_mask(f"pairs[{k}] mask", mask, self.shape)
-            kappa = check_kappa(kappa, 3, name=f"pairs[{k}] kappa")
+        for k, (mask, kappa) in enumerate(check_kappa_pairs(pairs, self.shape)):
             ids = self.shapes_of(mask)
             if not ids:
                 raise InputError(f"pairs[{k}] mask covers no shape (at least half of a shape's visible pixels)")

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from devices._common import cache_folder
 from devices.base import SimulatedRig
 from devices.registry import Availability
 from devices.virtual.camera import CameraModel, VirtualCamera
@@ -156,13 +157,7 @@ def open_rig(arg: str, **options) -> VirtualRig:
         patch = scene.patch_size
     elif isinstance(patch, bool) or not isinstance(patch, (int, float)) or not np.isfinite(patch) or patch <= 0:
         raise InputError(f"patch_size must be a positive number of metres, got {patch!r}")
-    cache = options.get("cache_dir", None)
-    if cache is None:
-        cache = default_cache_dir()
-    elif cache is False:
-        cache = None
-    elif not isinstance(cache, (str, os.PathLike)):
-        raise InputError(f"cache_dir must be a path, None or False, got {cache!r}")
+    cache = cache_folder(options.get("cache_dir", None), default_cache_dir)
 
     geometry = Geometry(res, kind, pres, float(patch), int(sub))
     setup = load_or_build(scene, geometry, None if cache is None else Path(cache),

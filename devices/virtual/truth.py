@@ -15,7 +15,7 @@ from devices.virtual.camera import CameraModel
 from devices.virtual.projector import ProjectorModel, check_pattern
 from devices.virtual.render import Renderer
 from devices.virtual.transport import Resolvent, interactions
-from engine.checks import check_kappa, check_mask, check_order
+from engine.checks import check_kappa_pairs, check_mask, check_order
 from engine.errors import InputError
 
 
@@ -171,13 +171,7 @@ class Truth:
         """
         e = self._light(ambient, pattern)
         scale = np.ones_like(self._r.rho)
-        for k, pair in enumerate(pairs):
-            try:
-                mask, kappa = pair
-            except (TypeError, ValueError):
-                raise InputError(f"pairs[{k}] must be a (mask, kappa) pair, got {type(pair).__name__}") from None
-            mask = check_mask(f"pairs[{k}] mask", mask, self.shape)
-            kappa = check_kappa(kappa, 3, name=f"pairs[{k}] kappa")
+        for mask, kappa in check_kappa_pairs(pairs, self.shape):
             scale[self._pixels_to_samples(mask)] *= kappa
         rho = self._r.rho * scale
         out = Resolvent(self._r.setup, rho).solve(e)
