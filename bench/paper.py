@@ -195,22 +195,26 @@ class Bench:
         """The painted target ``name`` (camera pixels)."""
         return self.rig.targets[name]
 
-    def painted(self, name: str, edge: str = "hard") -> np.ndarray:
+    def painted(self, name: str, edge: str = "hard", together=()) -> np.ndarray:
         """The target as the artist paints it: ``"hard"`` the rig's mask, ``"refine"`` that
         mask refined into a soft mask from a captured photograph (:func:`engine.edge.refine_mask`,
-        the app's Refine Edge; made once per target)."""
+        the app's Refine Edge; made once per target, sharing its boundary pixels with the targets
+        it is acquired ``together`` with)."""
         if edge == "hard":
             return self.mask(name)
         if name not in self._soft:
-            self._soft[name] = refine_mask(self.mask(name), self.capture_photograph())
+            claimed = sum((self._soft.get(n, self.mask(n)) for n in together if n != name),
+                          np.zeros(self.mask(name).shape, np.float32))
+            self._soft[name] = refine_mask(self.mask(name), self.capture_photograph(),
+                                           claimed=np.minimum(claimed, 1.0))
         return self._soft[name]
 
-    def prepared(self, name: str, edge: str = "hard"):
+    def prepared(self, name: str, edge: str = "hard", together=()):
         """The target's D and emittable mask (measured on first use)."""
         if (name, edge) not in self._prepared:
             recorder = Recorder(self.rig, frames=self.frames)
-            self._prepared[name, edge] = prepare_target(recorder, self.calibration, self.painted(name, edge),
-                                                        self.base, name=name)
+            self._prepared[name, edge] = prepare_target(recorder, self.calibration,
+                                                        self.painted(name, edge, together), self.base, name=name)
             self.captures += recorder.count
         return self._prepared[name, edge]
 
@@ -220,9 +224,9 @@ class Bench:
         each target painted as ``edge`` says (:meth:`painted`)."""
         recorder = Recorder(self.rig, frames=self.frames if frames is None else frames)
         result = acquire_cascade(
-            recorder, self.calibration, [(n, self.painted(n, edge)) for n in names], order,
+            recorder, self.calibration, [(n, self.painted(n, edge, names)) for n in names], order,
             fixed_kappa=list(fixed_kappa), adaptive=adaptive, photograph_pattern=self.flood,
-            prepared=[self.prepared(n, edge) for n in names],
+            prepared=[self.prepared(n, edge, names) for n in names],
         )
         self.captures += recorder.count
         return result
