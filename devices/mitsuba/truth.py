@@ -91,7 +91,9 @@ class Truth:
         """
         return self._render(ambient, pattern)
 
-    def recolor(self, pairs, *, ambient: bool = True, pattern: np.ndarray | None = None) -> np.ndarray:
+    def recolor(
+        self, pairs, *, ambient: bool = True, pattern: np.ndarray | None = None, coat: bool = False
+    ) -> np.ndarray:
         """The scene re-rendered with the diffuse reflectance of each mask's shapes scaled by its κ.
 
         Parameters
@@ -101,6 +103,12 @@ class Truth:
             multiply.
         ambient, pattern
             As :meth:`photograph`.
+        coat : bool, default False
+            Scale a glossy coat's specular reflectance too, so that every light path is
+            weighted by κ to the power of its reflections off the shapes, glossy or diffuse:
+            the recolor of the interaction components the paper counts for its Fig. 13 (a
+            path tracer tagging every interaction with the target). False (the default) is
+            the physical repaint: the paint under the coat changes, its gloss does not.
 
         Returns
         -------
@@ -111,6 +119,8 @@ class Truth:
         InputError
             Bad masks or kappas, or a mask that covers no shape.
         """
+        if not isinstance(coat, (bool, np.bool_)):
+            raise InputError(f"coat must be True or False, got {coat!r}")
         factors: dict[str, np.ndarray] = {}
         for k, (mask, kappa) in enumerate(check_kappa_pairs(pairs, self.shape)):
             ids = self.shapes_of(mask)
@@ -118,7 +128,7 @@ class Truth:
                 raise InputError(f"pairs[{k}] mask covers no shape (at least half of a shape's visible pixels)")
             for sid in ids:
                 factors[sid] = factors.get(sid, np.ones(3)) * kappa
-        with self._r.scaled(factors):
+        with self._r.scaled(factors, coat=bool(coat)):
             return self._render(ambient, pattern)
 
     def direct(self, mask: np.ndarray | None = None) -> np.ndarray:

@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from scipy.ndimage import binary_erosion
 
 import devices
 from engine.errors import InputError
@@ -104,6 +105,25 @@ def test_truth_recolors_shapes_including_their_mixed_pixels(rig):
         rig.truth.recolor([(np.zeros_like(mask), 2.0)])
     with pytest.raises(InputError, match="interaction components"):
         rig.truth.components(mask, 3)
+
+
+def test_truth_repaints_under_a_glossy_coat_or_scales_every_interaction():
+    with devices.open_rig("mitsuba:wedge", ideal=True, specular=0.3, roughness=0.3, **SMALL) as r:
+        r.flood()
+        flood = r.projector.image
+        left = r.targets["left"]
+        solid = binary_erosion(r.coverage["left"] == 1, np.ones((3, 3), bool))  # wholly wall, surely
+        assert solid.sum() > 20
+        paint = r.truth.recolor([(left, 0.0)], ambient=False, pattern=flood)
+        every = r.truth.recolor([(left, 0.0)], ambient=False, pattern=flood, coat=True)
+        photo = r.truth.photograph(ambient=False, pattern=flood)
+        # black paint under the coat: the wall keeps its gloss (a share of its light, from the right wall)
+        share = paint[solid].mean() / photo[solid].mean()
+        assert 0.05 < share < 0.6, share
+        assert not every[solid].any()  # no reflection off the wall at all: every path through it is gone
+        assert np.median(every[~left & (photo.sum(-1) > 0)].sum(-1) / photo[~left & (photo.sum(-1) > 0)].sum(-1)) < 1
+        with pytest.raises(InputError, match="coat must be True or False"):
+            r.truth.recolor([(left, 2.0)], coat="yes")
 
 
 def test_a_scene_lit_by_the_projector_alone_has_a_black_ambient_image():
