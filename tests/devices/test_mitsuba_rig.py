@@ -12,6 +12,7 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 import devices
+from engine.acquire.predict import relative_error
 from engine.errors import InputError
 
 mi = pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
@@ -103,8 +104,25 @@ def test_truth_recolors_shapes_including_their_mixed_pixels(rig):
     assert rig.truth.shapes_of(mask) == ["right_wall"]
     with pytest.raises(InputError, match="covers no shape"):
         rig.truth.recolor([(np.zeros_like(mask), 2.0)])
-    with pytest.raises(InputError, match="interaction components"):
-        rig.truth.components(mask, 3)
+
+
+def test_truth_components_sum_to_the_recolor_truth(rig):
+    mask = rig.targets["right_wall"]
+    kappa = np.array([0.5, 1.5, 2.0])
+    c = rig.truth.components(mask, 4)
+    assert c.inside.shape == (4, 24, 24, 3) and c.order == 4
+    assert not c.inside[:, ~mask].any() and not c.outside[:, mask].any() and not c.unreached[mask].any()
+    wall = binary_erosion(mask, np.ones((3, 3), bool))
+    first, second = c.inside[0][wall].sum(), c.inside[1][wall].sum()
+    assert 0.01 * first < second < 0.5 * first  # a flat wall lights itself only through the others
+    comps = c.inside + c.outside
+    ours = c.unreached + sum(kappa.astype(np.float32) ** (i + 1) * comps[i] for i in range(4))
+    truth = rig.truth.recolor([(mask, kappa)])
+    floor = relative_error(rig.truth.recolor([(mask, kappa)]), truth)
+    assert relative_error(ours, truth) < 1.5 * floor + 0.01, (relative_error(ours, truth), floor)
+    assert relative_error(c.unreached + comps.sum(0), rig.truth.photograph()) < 1.5 * floor + 0.01
+    with pytest.raises(InputError, match="covers no shape"):
+        rig.truth.components(np.zeros_like(mask), 3)
 
 
 def test_truth_repaints_under_a_glossy_coat_or_scales_every_interaction():
