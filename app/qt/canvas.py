@@ -192,23 +192,43 @@ class Canvas(QWidget):
         r, g, b = (int(c * alpha / 255) for c in colour)  # premultiplied ARGB
         return np.uint32((alpha << 24) | (r << 16) | (g << 8) | b)
 
+    @staticmethod
+    def _words(colour, alpha: np.ndarray) -> np.ndarray:
+        """Premultiplied ARGB words of one colour at per-pixel ``alpha`` (uint32 0..255), as :meth:`_word`."""
+        r, g, b = ((np.uint32(c) * alpha) // np.uint32(255) for c in colour)
+        return (alpha << np.uint32(24)) | (r << np.uint32(16)) | (g << np.uint32(8)) | b
+
     def _compose(self, y0: int, y1: int, x0: int, x1: int) -> None:
-        """Redraw the overlay in a box: light fill, strong outline, hatched unreachable pixels."""
+        """Redraw the overlay in a box: light fill, strong outline, hatched unreachable pixels.
+
+        The outline covers a target's edge band — pixels partly on it (coverage between 0 and
+        1, a feathered stroke or a refined edge) and the whole pixels next to them or to the
+        outside — with an alpha proportional to each pixel's coverage, so a soft edge shows as a
+        ramp; a binary mask's band is its one-pixel boundary at full alpha.
+        """
         h, w = self.doc.shape
         # one extra pixel around the box so outlines at its border see their neighbours
         ey0, ey1, ex0, ex1 = max(y0 - 1, 0), min(y1 + 1, h), max(x0 - 1, 0), min(x1 + 1, w)
         region = np.zeros((ey1 - ey0, ex1 - ex0), np.uint32)
         painted = np.zeros(region.shape, bool)
         for t in self.doc.targets:
-            m = t.mask[ey0:ey1, ex0:ex1]
-            if not m.any():
+            cov = None if t.coverage is None else t.coverage[ey0:ey1, ex0:ex1]
+            seen = t.mask[ey0:ey1, ex0:ex1] if cov is None else cov > 0
+            if not seen.any():
                 continue
-            p = np.pad(m, 1, mode="edge")
-            interior = p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:] & m
+            whole = seen if cov is None else cov >= 1
+            p = np.pad(whole, 1, mode="edge")
+            interior = p[:-2, 1:-1] & p[2:, 1:-1] & p[1:-1, :-2] & p[1:-1, 2:] & whole
             current = t.uid == self.doc.current
-            region[m] = self._word(t.colour, _CURRENT_ALPHA if current else _OVERLAY_ALPHA)
-            region[m & ~interior] = self._word(t.colour, 255 if current else 200)
-            painted |= m
+            band = seen & ~interior
+            region[interior] = self._word(t.colour, _CURRENT_ALPHA if current else _OVERLAY_ALPHA)
+            strong = 255 if current else 200
+            if cov is None:
+                region[band] = self._word(t.colour, strong)
+            else:
+                alpha = np.rint(np.clip(cov[band], 0, 1) * strong).astype(np.uint32)
+                region[band] = self._words(t.colour, alpha)
+            painted |= seen
         if self.doc.unreachable is not None:
             unreach = self.doc.unreachable[ey0:ey1, ex0:ex1]
             if unreach.any():

@@ -350,8 +350,12 @@ class Renderer:
         return (counts / passes).astype(np.float32)
 
     @contextmanager
-    def scaled(self, factors: dict):
-        """Temporarily scale the diffuse reflectance of shapes: ``{shape_id: (3,) kappa}``."""
+    def scaled(self, factors: dict, *, coat: bool = False):
+        """Temporarily scale the diffuse reflectance of shapes: ``{shape_id: (3,) kappa}``.
+
+        With ``coat`` a glossy coat's specular reflectance is scaled too: the whole BSDF, so
+        every reflection off the shape is weighted by κ.
+        """
         changed = {}
         try:
             for sid, k in factors.items():
@@ -360,7 +364,7 @@ class Renderer:
                     for key in self.params.keys()
                     if key.startswith(f"{sid}.bsdf.")
                     and (key.endswith("reflectance.value") or key.endswith("reflectance.data"))
-                    and "specular_reflectance" not in key
+                    and (coat or "specular_reflectance" not in key)
                 ]
                 if not keys:
                     raise InputError(f"shape {sid!r} has no diffuse reflectance to scale")

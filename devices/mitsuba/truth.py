@@ -5,7 +5,8 @@ visible footprint painted), and recoloring scales those shapes' diffuse reflecta
 they are seen — in mixed edge pixels, in reflections on a glossy floor, and where the mask
 was not painted. Truth renders carry Monte Carlo noise at ``truth_spp`` samples per pixel;
 each call draws new seeds, so two calls give two independent renders (their difference is
-the render's own noise floor).
+the render's own noise floor). The interaction components come from renders with the
+shapes' whole BSDF scaled, on one sample sequence (:meth:`Truth.components`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import numpy as np
 from devices.mitsuba.render import TRUTH_SEEDS, Renderer, mitsuba
 from devices.virtual.camera import CameraModel
 from devices.virtual.projector import ProjectorModel, check_pattern
-from engine.checks import check_kappa_pairs, check_mask
+from devices.virtual.truth import Components
+from engine.checks import check_kappa_pairs, check_mask, check_order
 from engine.errors import InputError
 
 
@@ -91,7 +93,9 @@ class Truth:
         """
         return self._render(ambient, pattern)
 
-    def recolor(self, pairs, *, ambient: bool = True, pattern: np.ndarray | None = None) -> np.ndarray:
+    def recolor(
+        self, pairs, *, ambient: bool = True, pattern: np.ndarray | None = None, coat: bool = False
+    ) -> np.ndarray:
         """The scene re-rendered with the diffuse reflectance of each mask's shapes scaled by its κ.
 
         Parameters
@@ -101,6 +105,12 @@ class Truth:
             multiply.
         ambient, pattern
             As :meth:`photograph`.
+        coat : bool, default False
+            Scale a glossy coat's specular reflectance too, so that every light path is
+            weighted by κ to the power of its reflections off the shapes, glossy or diffuse:
+            the recolor of the interaction components the paper counts for its Fig. 13 (a
+            path tracer tagging every interaction with the target). False (the default) is
+            the physical repaint: the paint under the coat changes, its gloss does not.
 
         Returns
         -------
@@ -111,6 +121,8 @@ class Truth:
         InputError
             Bad masks or kappas, or a mask that covers no shape.
         """
+        if not isinstance(coat, (bool, np.bool_)):
+            raise InputError(f"coat must be True or False, got {coat!r}")
         factors: dict[str, np.ndarray] = {}
         for k, (mask, kappa) in enumerate(check_kappa_pairs(pairs, self.shape)):
             ids = self.shapes_of(mask)
@@ -118,7 +130,7 @@ class Truth:
                 raise InputError(f"pairs[{k}] mask covers no shape (at least half of a shape's visible pixels)")
             for sid in ids:
                 factors[sid] = factors.get(sid, np.ones(3)) * kappa
-        with self._r.scaled(factors):
+        with self._r.scaled(factors, coat=bool(coat)):
             return self._render(ambient, pattern)
 
     def direct(self, mask: np.ndarray | None = None) -> np.ndarray:
@@ -143,17 +155,66 @@ class Truth:
         lamps = [k for k, s in enumerate(self._r.scene.shapes()) if s.emitter() is not None]
         return np.any(self._coverage[lamps] > 0, axis=0) if lamps else np.zeros(self.shape, bool)
 
-    def components(self, mask, order, **_):
-        """Not available: see the Notes.
+    def components(
+        self, mask: np.ndarray, order: int, *, ambient: bool = True, pattern: np.ndarray | None = None
+    ) -> Components:
+        """The interaction components of the shapes ``mask`` stands for, every interaction counted.
+
+        Parameters
+        ----------
+        mask : (H, W) bool
+            Target pixels; the shapes are those of :meth:`shapes_of`.
+        order : int
+            K, the number of components (>= 1).
+        ambient, pattern
+            As :meth:`photograph`.
+
+        Returns
+        -------
+        devices.virtual.truth.Components
+            ``inside[i]`` on the mask and ``outside[i]`` off it: light that reflected exactly
+            i + 1 times off the shapes (``R^i L_d``, ``C R^i L_d``); ``unreached`` off the
+            mask: light that never touched them (``L̄_d``).
 
         Notes
         -----
-        Counting target interactions needs an integrator that tags each path vertex with its
-        shape; in Mitsuba's ``scalar_rgb`` variant a Python integrator runs once per sample
-        (hours at 64² and 1024 spp), and the vectorised variants crash on this machine's LLVM.
-        The recolor truth (re-rendering with scaled reflectance) is exact without it.
+        A reflection off a glossy coat counts as an interaction, as in the paper's Fig. 13 (a
+        path tracer tagging every interaction with the target). Each path's contribution is
+        ``t^n`` times its value when the shapes' whole BSDF is scaled by ``t`` (n: its
+        reflections off them), so with Russian roulette off and the *same* sample sequence
+        for every render, the render is exactly a polynomial in ``t`` pixel by pixel. K + 2
+        renders at ``t`` in [0.25, 2.2] give its coefficients up to degree K + 1 (the last
+        absorbs the higher orders, which are many decades below at these ``t``); the
+        components carry the Monte Carlo noise of one render at ``spp``.
         """
-        raise InputError(
-            "the mitsuba rig has no ground-truth interaction components (a per-sample Python "
-            "integrator is too slow in scalar_rgb); compare recolored images with truth.recolor"
+        mi = mitsuba()
+        order = check_order(order)
+        mask = check_mask("mask", mask, self.shape)
+        ids = self.shapes_of(mask)
+        if not ids:
+            raise InputError("mask covers no shape (at least half of a shape's visible pixels)")
+        if not isinstance(ambient, (bool, np.bool_)):
+            raise InputError(f"ambient must be True or False, got {ambient!r}")
+        emitted = self._emitted(pattern)
+        depth = self._r.max_depth
+        no_roulette = mi.load_dict({"type": "path", "max_depth": depth, "rr_depth": depth + 1})
+        self._calls += 1
+        seed = TRUTH_SEEDS + self._calls  # one sample sequence for every t
+        ts = np.linspace(0.25, 2.2, order + 2)
+        renders = []
+        for t in ts:
+            with self._r.scaled({sid: np.full(3, t) for sid in ids}, coat=True):
+                img = self._r.render_lights(ambient=bool(ambient), emitted=emitted, spp=self.spp, seed=seed,
+                                            integrator=no_roulette)
+            renders.append(img.astype(np.float64))
+        stack = np.stack(renders).reshape(len(ts), -1)
+        coef = np.linalg.solve(np.vander(ts, len(ts), increasing=True), stack).reshape((len(ts),) + renders[0].shape)
+        terms = np.maximum(coef[: order + 1], 0)  # every path adds a non-negative amount: below 0 is rounding
+        m = mask[None, ..., None]
+        return Components(
+            inside=np.where(m, terms[1:], 0).astype(np.float32),
+            outside=np.where(m, 0, terms[1:]).astype(np.float32),
+            unreached=np.where(mask[..., None], 0, terms[0]).astype(np.float32),
+            target=mask.copy(),
+            order=order,
         )

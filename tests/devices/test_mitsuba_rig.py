@@ -9,8 +9,10 @@ import sys
 
 import numpy as np
 import pytest
+from scipy.ndimage import binary_erosion
 
 import devices
+from engine.acquire.predict import relative_error
 from engine.errors import InputError
 
 mi = pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
@@ -102,8 +104,44 @@ def test_truth_recolors_shapes_including_their_mixed_pixels(rig):
     assert rig.truth.shapes_of(mask) == ["right_wall"]
     with pytest.raises(InputError, match="covers no shape"):
         rig.truth.recolor([(np.zeros_like(mask), 2.0)])
-    with pytest.raises(InputError, match="interaction components"):
-        rig.truth.components(mask, 3)
+
+
+def test_truth_components_sum_to_the_recolor_truth(rig):
+    mask = rig.targets["right_wall"]
+    kappa = np.array([0.5, 1.5, 2.0])
+    c = rig.truth.components(mask, 4)
+    assert c.inside.shape == (4, 24, 24, 3) and c.order == 4
+    assert not c.inside[:, ~mask].any() and not c.outside[:, mask].any() and not c.unreached[mask].any()
+    wall = binary_erosion(mask, np.ones((3, 3), bool))
+    first, second = c.inside[0][wall].sum(), c.inside[1][wall].sum()
+    assert 0.01 * first < second < 0.5 * first  # a flat wall lights itself only through the others
+    comps = c.inside + c.outside
+    ours = c.unreached + sum(kappa.astype(np.float32) ** (i + 1) * comps[i] for i in range(4))
+    truth = rig.truth.recolor([(mask, kappa)])
+    floor = relative_error(rig.truth.recolor([(mask, kappa)]), truth)
+    assert relative_error(ours, truth) < 1.5 * floor + 0.01, (relative_error(ours, truth), floor)
+    assert relative_error(c.unreached + comps.sum(0), rig.truth.photograph()) < 1.5 * floor + 0.01
+    with pytest.raises(InputError, match="covers no shape"):
+        rig.truth.components(np.zeros_like(mask), 3)
+
+
+def test_truth_repaints_under_a_glossy_coat_or_scales_every_interaction():
+    with devices.open_rig("mitsuba:wedge", ideal=True, specular=0.3, roughness=0.3, **SMALL) as r:
+        r.flood()
+        flood = r.projector.image
+        left = r.targets["left"]
+        solid = binary_erosion(r.coverage["left"] == 1, np.ones((3, 3), bool))  # wholly wall, surely
+        assert solid.sum() > 20
+        paint = r.truth.recolor([(left, 0.0)], ambient=False, pattern=flood)
+        every = r.truth.recolor([(left, 0.0)], ambient=False, pattern=flood, coat=True)
+        photo = r.truth.photograph(ambient=False, pattern=flood)
+        # black paint under the coat: the wall keeps its gloss (a share of its light, from the right wall)
+        share = paint[solid].mean() / photo[solid].mean()
+        assert 0.05 < share < 0.6, share
+        assert not every[solid].any()  # no reflection off the wall at all: every path through it is gone
+        assert np.median(every[~left & (photo.sum(-1) > 0)].sum(-1) / photo[~left & (photo.sum(-1) > 0)].sum(-1)) < 1
+        with pytest.raises(InputError, match="coat must be True or False"):
+            r.truth.recolor([(left, 2.0)], coat="yes")
 
 
 def test_a_scene_lit_by_the_projector_alone_has_a_black_ambient_image():
