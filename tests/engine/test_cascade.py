@@ -115,6 +115,16 @@ def test_bad_cascades_are_refused():
         acquire_cascade(Recorder(rig), cal, [], 3)
     with pytest.raises(InputError, match="non-negative"):
         acquire_cascade(Recorder(rig), cal, [("a", t0), ("b", t1)], 3, fixed_kappa=[-1.0])
+    soft = t0.astype(np.float32)
+    soft[np.nonzero(t0)[0][0], np.nonzero(t0)[1][0]] = 0.5  # one partly covered pixel: a soft edge
+    with pytest.raises(InputError, match="'a' has a soft edge but is not the last"):
+        acquire_cascade(Recorder(rig), cal, [("a", soft), ("b", t1)], 3, fixed_kappa=[1.0])
+    from engine.workflow.capture import check_targets
+
+    with pytest.raises(InputError, match="'a' has a soft edge but is not the last"):
+        check_targets([("a", soft), ("b", t1)], t0.shape)
+    check_targets([("b", t1), ("a", soft)], t0.shape)  # the last target may be soft
+    assert rig.captures == 0
 
 
 def test_automatic_order_stops_when_the_linear_prediction_is_good_enough():
