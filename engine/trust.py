@@ -111,6 +111,58 @@ class TrustedDecomposition:
         """The highest order decomposed (1: the photograph only)."""
         return max((lv.order for lv in self.levels), default=1)
 
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Named plain arrays (no pickle), e.g. for a session's cache; :meth:`from_arrays` reads them back.
+
+        Examples
+        --------
+        >>> t = TrustedDecomposition(np.ones((1, 2, 3), np.float32), np.zeros((1, 2, 3), np.float32), (),
+        ...                          np.array([[True, False]]))
+        >>> back = TrustedDecomposition.from_arrays(t.to_arrays())
+        >>> back.order, bool(np.array_equal(back.target, t.target)), back.unreached_light
+        (1, True, True)
+        """
+        arrays = {"photograph": self.photograph, "photograph_variance": self.photograph_variance,
+                  "target": self.target, "flags": np.array([self.unreached_light], bool),
+                  "orders": np.array([lv.order for lv in self.levels], np.int64)}
+        for lv in self.levels:
+            arrays.update({f"shares{lv.order}": lv.shares, f"share_covariance{lv.order}": lv.share_covariance,
+                           f"photograph_share_covariance{lv.order}": lv.photograph_share_covariance,
+                           f"sums{lv.order}": lv.sums})
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> TrustedDecomposition:
+        """Inverse of :meth:`to_arrays`.
+
+        Raises
+        ------
+        InputError
+            A missing array, or arrays whose shapes do not fit together.
+        """
+        try:
+            photo = np.asarray(arrays["photograph"], np.float32)
+            target = np.asarray(arrays["target"], bool)
+            levels = []
+            for k in (int(v) for v in np.asarray(arrays["orders"]).ravel()):
+                n = k - 1
+                lv = TrustLevel(np.asarray(arrays[f"shares{k}"], np.float32),
+                                np.asarray(arrays[f"share_covariance{k}"], np.float32),
+                                np.asarray(arrays[f"photograph_share_covariance{k}"], np.float32),
+                                np.asarray(arrays[f"sums{k}"], np.float64))
+                if (lv.shares.shape != (n,) + photo.shape or lv.photograph_share_covariance.shape != lv.shares.shape
+                        or lv.share_covariance.shape != (n * (n + 1) // 2,) + photo.shape
+                        or lv.sums.shape != (2, k, photo.shape[2])):
+                    raise InputError(f"the arrays of order {k} do not fit a {photo.shape} photograph")
+                levels.append(lv)
+            variance = np.asarray(arrays["photograph_variance"], np.float32)
+            if photo.ndim != 3 or variance.shape != photo.shape or target.shape != photo.shape[:2]:
+                raise InputError(f"photograph {photo.shape}, its variance {variance.shape} and target {target.shape} "
+                                 "do not fit together")
+            return cls(photo, variance, tuple(levels), target, bool(np.asarray(arrays["flags"]).ravel()[0]))
+        except KeyError as exc:
+            raise InputError(f"a noise-aware decomposition needs the array {exc.args[0]!r}") from None
+
 
 @dataclass(frozen=True, eq=False)
 class TrustedRecolor:

@@ -20,6 +20,7 @@ QUICK = {
     "recolor.py": ["--megapixels", "0.05", "--order", "2"],
     "solve.py": ["--size", "40", "40", "--scipy-columns", "50", "--skip-full"],
     "preview.py": ["--height", "1440", "--width", "2560", "--order", "2", "--events", "3"],
+    "trusted.py": ["--size", "32", "40", "--order", "2", "--repeats", "1"],
 }
 
 
