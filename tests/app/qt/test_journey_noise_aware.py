@@ -89,6 +89,7 @@ def test_the_artist_edits_with_the_noise_aware_recolor_and_exports_it(make_windo
     # the choice is saved with the edit (the demo's Save is a Save As)
     monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(tmp_path / "kept"), "")))
     user.trigger("noise_aware")  # plain
+    assert not window.noise_aware_default()  # remembered for the next acquisition
     assert window.save()
     assert saved_edit(Session.open(tmp_path / "kept")).acquisition.noise_aware is False
     window.export(tmp_path / "plain.exr", dtype="float")
