@@ -73,7 +73,7 @@ def edge(coverage: np.ndarray) -> np.ndarray:
     return (c > 0) & (c < 1)
 
 
-def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) -> np.ndarray:
+def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, claimed=None) -> np.ndarray:
     """Refine a hard target mask into coverage along the photograph's edges.
 
     Parameters
@@ -89,11 +89,17 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) 
         Coverages within ``snap`` of 0 or 1 become exactly 0 or 1 (a pixel that is almost
         all target is re-emitted; shading gradients at concave corners look like a little
         mixing).
+    claimed : (H, W) float in [0, 1] or bool, optional
+        How much of each pixel other targets already cover (their coverages summed). The
+        result never exceeds ``1 − claimed``: two touching targets refined one after the
+        other share their boundary pixels instead of both claiming them (a cascade refuses
+        coverages that sum past 1).
 
     Returns
     -------
     (H, W) float32
-        Coverage in [0, 1]; only pixels on the mask's boundary (either side) change.
+        Coverage in [0, 1]; only pixels on the mask's boundary (either side) change, and
+        pixels others claim.
 
     Notes
     -----
@@ -120,6 +126,9 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) 
         raise InputError(f"photograph must have the mask's shape {mask.shape} (+ channels), got {photo.shape}")
     if not np.isfinite(contrast) or contrast < 0 or not np.isfinite(snap) or not 0 <= snap < 0.5:
         raise InputError(f"contrast must be >= 0 and snap in [0, 0.5), got contrast={contrast!r}, snap={snap!r}")
+    room = None
+    if claimed is not None:
+        room = 1.0 - check_coverage("claimed", claimed, mask.shape)
     h, w = mask.shape
     m8 = mask.astype(np.uint8)
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
@@ -129,7 +138,7 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) 
     near = cv2.dilate(m8, square) > cv2.erode(m8, square)
     out = mask.astype(np.float32)
     if not near.any():
-        return out
+        return out if room is None else np.minimum(out, room)
     img = np.pad(photo.astype(np.float64), ((3, 3), (3, 3), (0, 0)), mode="edge")
 
     def side(sure):
@@ -156,7 +165,7 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1) 
     out[ok] = np.clip(alpha[ok], 0.0, 1.0)
     out[out <= snap] = 0.0
     out[out >= 1.0 - snap] = 1.0
-    return out
+    return out if room is None else np.minimum(out, room)
 
 
 def blend_edges(

@@ -52,6 +52,9 @@ SIGNIFICANT = 3.0
 DARK = 0.1
 #: A share's variance beyond this (σ a thousand times the pixel's own light) means "unknown".
 UNKNOWN = 1e6
+#: No share's variance is taken below this fraction of its region's median (σ 1000× below it):
+#: a rounding-level variance would otherwise overflow the weights and decide its whole window.
+PRECISE = 1e-6
 #: Largest decay ratio (and κ·ratio) used to extrapolate: the series must converge.
 MAX_RATIO = 0.95
 
@@ -615,7 +618,11 @@ def _smooth(s: np.ndarray, v: np.ndarray, lit: np.ndarray, radii, window: int):
     Returns the smoothed share, its mean squared error (variance and bias) and the chosen
     window's effective number of pixels (for the covariances between shares).
     """
+    s = np.asarray(s, np.float64)
+    v = np.asarray(v, np.float64)
     ok = lit & np.isfinite(v) & (v > 0)
+    if ok.any():  # a pixel fitted exactly (a rounding-level variance) is not infinitely precise
+        v = np.where(ok, np.maximum(v, PRECISE * float(np.median(v[ok]))), v)
     vv = np.where(ok, v, 0.0)
     u = np.where(ok, 1.0 / np.where(ok, v, 1.0), 0.0)
     s0 = np.where(ok, s, 0.0)

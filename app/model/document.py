@@ -333,15 +333,20 @@ class Document:
     def refine_edge(self, uid: int) -> int:
         """Refine the target's edge from the photograph (:func:`engine.edge.refine_mask`), one undo step.
 
-        Pixels on the binary mask's boundary get the fraction of them on the target; returns
-        how many pixels are partly target afterwards.
+        Pixels on the binary mask's boundary get the fraction of them on the target (never
+        more than the other targets leave of them); returns how many pixels are partly target
+        afterwards.
         """
         if lock := self.mask_lock(uid):
             raise InputError(lock)
         t = self.target(uid)
         if not t.mask.any():
             raise InputError(f"{t.name!r} is empty: paint it before refining its edge")
-        coverage = refine_mask(t.mask, self.photograph)
+        claimed = np.zeros(self.shape, np.float32)
+        for other in self.targets:  # touching targets share their boundary pixels
+            if other.uid != uid:
+                claimed += other.mask if other.coverage is None else other.coverage
+        coverage = refine_mask(t.mask, self.photograph, claimed=np.minimum(claimed, 1.0))
         bbox = (0, self.shape[0], 0, self.shape[1])
         if t.coverage is None:
             t.coverage = t.mask.astype(np.float32)

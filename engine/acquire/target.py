@@ -95,16 +95,19 @@ class PreparedTarget:
         return d
 
     def trust(self, observations, covariance, *, unreached_light: bool = True, fill_radius: int = 3,
-              should_stop=None) -> TrustedDecomposition:
+              edge_radius: int = 1, should_stop=None) -> TrustedDecomposition:
         """The observations ready for noise-aware recoloring (:mod:`engine.trust`).
 
         Unconstrained weighted decompositions of every order up to the observations' (the
-        first k observations are an order-k acquisition), unreachable pixels filled as in
-        :meth:`decompose`, shares smoothed by :func:`engine.trust.prepare_trust`.
+        first k observations are an order-k acquisition), unreachable pixels filled and, for a
+        soft mask, edge pixels blended from both sides as in :meth:`decompose`, shares smoothed
+        by :func:`engine.trust.prepare_trust`.
         """
         obs = np.asarray(observations)
         orders = [fill_unreachable(d, self.mask | self.unreachable, obs[0], radius=fill_radius)[0]
                   for d in decompose_orders(obs, self.mask, covariance, unreached_light=unreached_light)]
+        if self.coverage is not None:
+            orders = [blend_edges(d, self.coverage, obs[0], radius=edge_radius)[0] for d in orders]
         return prepare_trust(orders, obs[0], should_stop=should_stop)
 
     def report(self) -> str:

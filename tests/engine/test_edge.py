@@ -37,6 +37,24 @@ def test_refine_mask_recovers_the_coverage_of_mixed_pixels(dtype):
     assert solid(cov).sum() == (alpha == 1).sum() and edge(cov).sum() == edge(alpha).sum()
 
 
+def test_refine_mask_leaves_what_other_targets_claim():
+    """Coverage never exceeds what touching targets leave (a cascade refuses coverages summing
+    past 1): a neighbour's hard mask keeps the refined edge off its pixels, a neighbour's soft
+    edge caps it; unclaimed pixels are refined as before."""
+    alpha, photo = _two_sides()
+    right = alpha >= 0.5
+    free = refine_mask(right, photo, snap=0.0)
+    blocked = refine_mask(right, photo, snap=0.0, claimed=~right)  # the left target, still hard
+    np.testing.assert_array_equal(blocked, np.where(right, free, 0))  # its own edge still refined
+    claimed = np.zeros(alpha.shape, np.float32)
+    claimed[:, 6] = np.linspace(0.0, 0.9, alpha.shape[0])  # the left target refined first
+    shared = refine_mask(right, photo, snap=0.0, claimed=claimed)
+    np.testing.assert_allclose(shared, np.minimum(free, 1 - claimed), atol=1e-6)
+    assert (shared + claimed).max() <= 1.0 + 1e-6 and (shared[:, 6] < free[:, 6]).any()
+    with pytest.raises(InputError, match="claimed"):
+        refine_mask(right, photo, claimed=np.full(alpha.shape, 2.0, np.float32))
+
+
 def test_refine_mask_follows_a_linear_shading_gradient():
     alpha, photo = _two_sides()
     ramp = np.linspace(0.6, 1.4, photo.shape[1], dtype=np.float32)[None, :, None]

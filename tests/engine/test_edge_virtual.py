@@ -102,3 +102,24 @@ def test_a_soft_target_goes_through_a_session_and_comes_back_soft(tmp_path):
     again = load_decomposition(Session.open(tmp_path / "s"), key="0123456789abcdef")
     np.testing.assert_array_equal(again.components, d.components)
     np.testing.assert_array_equal(again.unreached, d.unreached)
+
+
+def test_noise_aware_recolor_blends_edge_pixels_like_the_plain_one(bench):
+    """The noise-aware recolor (engine.trust) of a soft-mask target recolors its edge pixels from
+    both sides too: without it a soft mask bought nothing there (they were recolored as neighbour)."""
+    from dataclasses import replace
+
+    from engine.trust import recolor_trusted
+
+    rig, rec, cal, truth = bench
+    cov = rig.coverage["right_wall"]
+    mixed = (cov > 0) & (cov < 1)
+    soft = acquire_single(rec, cal, cov, 4, name="soft-trust")
+    obs = soft.observations
+    blended = recolor_trusted(soft.target.trust(obs, soft.covariance), KAPPA)
+    unblended = recolor_trusted(replace(soft.target, coverage=None).trust(obs, soft.covariance), KAPPA)
+    plain = recolor(soft.target.decompose(obs), KAPPA)
+    e_trust, e_before, e_plain = (relative_error(img, truth, mixed) for img in (blended.image, unblended.image, plain))
+    assert e_trust < 0.5 * e_before, (e_trust, e_before)
+    assert e_trust < 1.2 * e_plain + 1e-3, (e_trust, e_plain)
+    assert np.array_equal(recolor_trusted(soft.target.trust(obs, soft.covariance), 1.0).image, obs[0])

@@ -109,3 +109,22 @@ def test_bad_inputs_are_refused(stack):
     with pytest.raises(InputError, match="covariance must have shape"):
         decompose_orders(obs, target, cov[:3])
     assert isinstance(prepare_trust(free, obs[0]), TrustedDecomposition)
+
+
+def test_a_pixel_with_vanishing_variance_neither_overflows_nor_takes_over(stack):
+    """A variance at float32's denormal floor (an exactly fitted pixel) made 1/v overflow float32
+    (RuntimeWarning, NaN correlation) and let that one pixel decide its whole smoothing window."""
+    obs, *_, target = stack(3, seed=1)
+    var = np.full(obs.shape[1:], 1e-4, np.float32)
+    cov = pack_covariance(np.stack([np.stack([var if i == j else np.zeros_like(var) for j in range(3)])
+                                    for i in range(3)]))
+    tiny = cov.copy()
+    tiny[:, 2, 3] = np.float32(1e-44)  # every entry of one pixel: denormal, positive on the diagonal
+    free = decompose(obs, target, constraint="none", covariance=cov)
+    odd = decompose(obs, target, constraint="none", covariance=tiny)
+    trusted = prepare_trust(odd, obs[0])  # numpy's RuntimeWarnings are errors in this suite
+    out, ref = recolor_trusted(trusted, KAPPA), recolor_trusted(prepare_trust(free, obs[0]), KAPPA)
+    assert np.all(np.isfinite(out.image)) and np.all(np.isfinite(out.sigma))
+    others = np.ones(obs.shape[1:3], bool)
+    others[2, 3] = False  # its neighbours are recolored as if it were an ordinary pixel
+    np.testing.assert_allclose(out.image[others], ref.image[others], rtol=0.02, atol=1e-4)

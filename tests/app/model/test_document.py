@@ -219,7 +219,7 @@ def test_a_soft_edge_is_saved_and_reopened_exactly(tmp_path):
     img[:, 7] = 0.35
     doc = Document(img)
     hard = doc.add_target("wall", np.zeros((12, 16), bool) | (np.arange(16) >= 8)[None, :])
-    doc.add_target("plain", np.eye(12, 16, dtype=bool))
+    doc.add_target("plain", np.eye(12, 16, dtype=bool) & (np.arange(16) < 6))  # away from the wall's edge
     assert doc.refine_edge(hard.uid) == 12
     create_session(tmp_path / "s", doc)
     again, _, _ = open_document(tmp_path / "s")

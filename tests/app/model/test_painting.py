@@ -267,3 +267,20 @@ def test_refine_edge_finds_the_coverage_of_mixed_pixels_and_undoes(doc):
     assert t.edge_pixels() == 0 and t.acquired_mask().dtype == bool
     d.history.redo()
     assert t.edge_pixels() == H
+
+
+def test_refine_edge_leaves_what_a_touching_target_covers():
+    """Refining two touching targets in turn never makes their coverages overlap (the
+    acquisition would refuse them)."""
+    img = np.full((H, W, 3), 0.1, np.float32)
+    img[:, 30:] = 0.9
+    img[:, 29] = 0.1 + 0.8 * 0.25
+    d = Document(img)
+    right = d.add_target("wall", np.zeros((H, W), bool) | (np.arange(W) >= 30)[None, :])
+    left = d.add_target("floor", np.zeros((H, W), bool) | (np.arange(W) < 30)[None, :])
+    d.refine_edge(right.uid)  # column 29 belongs to the floor's hard mask: the wall cannot take it
+    assert (right.coverage[:, 29] == 0).all()
+    d.refine_edge(left.uid)
+    d.refine_edge(right.uid)
+    total = left.coverage + right.coverage
+    assert total.max() <= 1.0 + 1e-6 and (right.coverage[:, 30:] == 1).all()
