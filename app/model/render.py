@@ -10,7 +10,7 @@ the table in :mod:`app.model.views`.
 
 With the noise-aware data (``trusted``, :mod:`engine.trust`) the recolored views show
 :func:`engine.trust.recolor_trusted` at full resolution, area-averaged — what export writes. It
-costs about 0.6 s per κ at 512² (bench/trusted.py), so a request marked ``fast`` (a slider
+costs about half a second per κ at 512² (bench/trusted.py), so a request marked ``fast`` (a slider
 moving) takes the plain preview path and the exact frame follows when the slider rests
 (:class:`app.qt.preview.PreviewController`).
 

@@ -14,7 +14,7 @@ has been still for :attr:`PreviewController.DETAIL_DELAY_MS`, and arrives throug
 user inspects at 100 % is the export's pixels.
 
 With the noise-aware recolor (the document's ``trusted`` data, :mod:`engine.trust`) a frame
-costs about 0.6 s at 512² instead of 4 ms (bench/trusted.py): every change is first drawn on the
+costs about half a second at 512² instead of 4 ms (bench/trusted.py): every change is first drawn on the
 fast plain path (a ``fast`` request), and once the picture has been still for
 :attr:`PreviewController.EXACT_DELAY_MS` the exact noise-aware frame — what export writes — is
 rendered on a third worker and replaces it.
