@@ -339,6 +339,11 @@ def recolor_trusted(trusted: TrustedDecomposition, kappa) -> TrustedRecolor:
     TrustedRecolor
         ``image`` (exactly the photograph for κ = 1), ``sigma`` and the orders used.
 
+    Raises
+    ------
+    InputError
+        Not a TrustedDecomposition, a bad κ, or a κ so large the result leaves float32's range.
+
     Notes
     -----
     The recolor is ``Σ_i w_i u_i`` (Eq. 3–4: ``w_i = κ^{i+1}`` on the target, ``κ^i`` off it
@@ -393,6 +398,13 @@ def recolor_trusted(trusted: TrustedDecomposition, kappa) -> TrustedRecolor:
             image[region, ch] = best_y
             sigma[region, ch] = np.sqrt(np.maximum(best_var + extra, 0))
             orders[name][ch] = best
+    top = float(np.finfo(np.float32).max)
+    if not (np.isfinite(image).all() and np.isfinite(sigma).all() and np.abs(image).max(initial=0.0) <= top
+            and sigma.max(initial=0.0) <= top):
+        raise InputError(
+            f"recoloring with kappa {kap.tolist()} at order {trusted.order} gives values that are not finite: "
+            f"κ^{trusted.order} multiplies the last interaction component beyond float32's range (or the data hold "
+            "non-finite values); use a smaller kappa")
     return TrustedRecolor(image.astype(np.float32), sigma.astype(np.float32), orders)
 
 
