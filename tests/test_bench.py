@@ -21,6 +21,7 @@ QUICK = {
     "solve.py": ["--size", "40", "40", "--scipy-columns", "50", "--skip-full"],
     "preview.py": ["--height", "1440", "--width", "2560", "--order", "2", "--events", "3"],
     "overlay.py": ["--size", "64", "--moves", "12", "--brush", "8"],
+    "trusted.py": ["--size", "32", "40", "--order", "2", "--repeats", "1"],
 }
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from engine.errors import InputError
 
 NAMES = ("solve", "recolor", "rig", "preview", "paper", "graycode", "denoise", "albedo", "loopback", "session",
-         "optics", "overlay", "bound")
+         "optics", "overlay", "trusted", "bound")
 
 
 def add_arguments(parser) -> None:

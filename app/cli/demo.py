@@ -14,7 +14,8 @@ the target is painted as an artist would: the scene's mask with its edge refined
 photograph (:func:`app.model.demo.refined_target`), so only pixels wholly on the wall are
 re-emitted and its edge pixels are recolored from both sides (``--edge``).
 
-The headline on stdout compares like with like: the relative error of our recolor and of a
+The headline on stdout compares like with like: the relative error of our recolor (the
+noise-aware one the app shows and exports, :mod:`engine.trust`; stderr also gives the plain one's) and of a
 naive per-pixel recolor over the surfaces (the lamp in view dominates the image's norm and
 every method reproduces it). Noise reduction is sized from the measured components' noise
 (:func:`app.model.noise.denoise_radius`), so it never blurs noise-free data.
@@ -32,7 +33,7 @@ import numpy as np
 from app.cli._args import frames, kappa, order, radius, resolution
 from app.cli.main import ProgressBar
 from app.model.demo import DEMO_KAPPA, DEMO_OPTIONS, DEMO_ORDER, DEMO_TARGET, refined_target
-from app.model.files import export_image, open_document
+from app.model.files import export_image, open_document, prepare_trusted, recolored_image
 from app.model.noise import SKIP_BELOW, denoise_radius
 from engine.acquire import Adaptive
 from engine.acquire.predict import relative_error
@@ -158,12 +159,17 @@ def run(args) -> int:
         size = int(args.denoise)
     if size > 0:
         d = noise_reduced(session, result.key, d, size)
-    ours = recolor(d, args.kappa)
+    plain = recolor(d, args.kappa)
     naive = np.where(mask[:, :, None], photo * args.kappa.astype(np.float32), photo)
-    err = {name: (relative_error(img, truth, surfaces), relative_error(img, truth))
-           for name, img in (("ours", ours), ("raw", raw), ("naive", naive))}
     save_edit(session, edit_from_plan(session, args.kappa, denoise=size))
-    export_image(open_document(session_path)[0], out / "recolored.exr", dtype="float")  # the edit in its metadata
+    doc = open_document(session_path)[0]
+    problem = prepare_trusted(doc, session, progress=ProgressBar())  # the noise-aware recolor, as the app shows it
+    if problem:
+        print(f"albedit demo: warning: {problem}", file=sys.stderr)
+    ours = recolored_image(doc)
+    export_image(doc, out / "recolored.exr", dtype="float")  # the edit in its metadata
+    err = {name: (relative_error(img, truth, surfaces), relative_error(img, truth))
+           for name, img in (("ours", ours), ("plain", plain), ("raw", raw), ("naive", naive))}
     write_image(out / "recolored.png", to_display(ours))
     write_image(out / "photograph.png", to_display(photo))
     write_image(out / "truth.png", to_display(truth))
@@ -182,7 +188,9 @@ def run(args) -> int:
         f"{result.targets[0][1].report()}\n" + (f"{estimated}\n" if estimated else "") +
         f"images: {result.images} observation images ({result.predicted} predicted) in {shots} camera shots: "
         f"{result.captures} for the observations, {shots - result.captures} for the direct image D\n"
-        f"noise reduction: {denoised}\n"
+        f"noise reduction (plain recolor): {denoised}\n"
+        f"recolor: {'noise-aware' if doc.trusted is not None else 'plain'}; the plain recolor scores "
+        f"{100 * err['plain'][0]:.2f} % on the surfaces\n"
         f"over the whole image (the lamp in view dominates the norm and every method reproduces it): "
         f"Albedit {100 * err['ours'][1]:.2f} %, naive {100 * err['naive'][1]:.2f} %\n"
         f"error.png: |ours - truth|, white = {scale:.3g} (99th percentile)\n"

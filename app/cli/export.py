@@ -5,7 +5,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from app.cli.recolor import add_denoise_option, open_edit, set_noise_reduction, write
+from app.cli.recolor import (
+    add_denoise_option,
+    add_recolor_option,
+    choose_recolor,
+    open_edit,
+    set_noise_reduction,
+    write,
+)
 from engine.errors import SessionError
 
 
@@ -14,6 +21,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, help="output image (.exr, .tif, .png)")
     parser.add_argument("--half", action="store_true", help="EXR: write half floats")
     add_denoise_option(parser)
+    add_recolor_option(parser)
 
 
 def run(args) -> int:
@@ -22,6 +30,7 @@ def run(args) -> int:
     if "edit" not in state and "edits" not in state:
         raise SessionError(f"session {args.session} has no saved edit: use `albedit recolor` or save from the app")
     set_noise_reduction(doc, session, args.denoise)
+    choose_recolor(doc, session, args.noise_aware, "export")
     write(doc, args.output, half=args.half)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0

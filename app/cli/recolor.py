@@ -17,12 +17,13 @@ import numpy as np
 
 from app.cli._args import kappa, radius
 from app.model.document import Document
-from app.model.files import export_image, open_document, save_document
+from app.model.files import export_image, open_document, prepare_trusted, save_document
 from engine.colour import convergence, parse_colour, to_hex
 from engine.errors import InputError, SessionError
 from engine.recolor import recolor, recolor_variance
 from engine.session import Session
 from engine.target_colour import TargetColour
+from engine.trust import recolor_trusted
 from engine.workflow import load_decomposition, saved_checker, target_albedo, target_colour, target_direct
 
 
@@ -46,6 +47,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, help="output image (.exr, .tif, .png)")
     parser.add_argument("--half", action="store_true", help="EXR: write half floats")
     add_denoise_option(parser)
+    add_recolor_option(parser)
 
 
 def albedo(text: str) -> np.ndarray:
@@ -64,6 +66,33 @@ def add_denoise_option(parser) -> None:
     parser.add_argument("--denoise", type=radius, default=None, metavar="RADIUS",
                         help="guided-filter radius for the interaction components, 0 = off "
                              "(default: the saved edit's, else off)")
+
+
+def add_recolor_option(parser) -> None:
+    """``--plain`` / ``--noise-aware``: which recolor to write (default: the saved edit's; new edits: noise-aware)."""
+    how = parser.add_mutually_exclusive_group()
+    how.add_argument("--plain", dest="noise_aware", action="store_false", default=None,
+                     help="write the plain κ-weighted sum of the components (Eq. 3-4), not the noise-aware recolor")
+    how.add_argument("--noise-aware", dest="noise_aware", action="store_true", default=None,
+                     help="write the noise-aware recolor (each component trusted as far as its measured noise allows; "
+                          "the default for every edit saved since the choice exists)")
+
+
+def choose_recolor(doc: Document, session: Session, noise_aware: bool | None, command: str) -> None:
+    """Use the recolor asked for (None keeps the saved edit's) and prepare the noise-aware one's data (seconds,
+    once per acquisition: cached in the session). A case that cannot be noise-aware is written plainly, with a warning.
+    """
+    if noise_aware is not None:
+        doc.set_noise_aware(noise_aware)
+    problem = prepare_trusted(doc, session)
+    if problem:
+        print(f"albedit {command}: warning: {problem}", file=sys.stderr)
+    acq = doc.acquisition
+    if doc.trusted is not None and acq.denoise:
+        print(f"albedit {command}: note: noise reduction (radius {acq.denoise}) filters the plain recolor; the "
+              "noise-aware one smooths each component as far as its own noise calls for (add --plain to use it)",
+              file=sys.stderr)
+    print(f"albedit {command}: {'noise-aware' if doc.trusted is not None else 'plain'} recolor", file=sys.stderr)
 
 
 def open_edit(path: Path, command: str) -> tuple[Document, Session]:
@@ -166,10 +195,17 @@ def run(args) -> int:
         print(f"albedit recolor: warning: {warning}", file=sys.stderr)
     doc.set_kappa(free.uid, new)
     set_noise_reduction(doc, session, args.denoise)
+    choose_recolor(doc, session, args.noise_aware, "recolor")
     write(doc, args.output, half=args.half)
     print(f"wrote {args.output}", file=sys.stderr)
     d = doc.acquisition.decomposition
-    if d.covariance is not None:  # the camera noise κ^(i+1) amplifies, on the target
+    if doc.trusted is not None:  # the noise-aware recolor's own prediction: noise and the bias it leaves
+        done = recolor_trusted(doc.trusted, new)
+        sigma = float(done.sigma[doc.trusted.target].mean())
+        value = float(np.abs(done.image[doc.trusted.target]).mean())
+        print(f"predicted σ on the target: {sigma:.4g} (mean), {sigma / max(value, 1e-30):.1%} of its mean value",
+              file=sys.stderr)
+    elif d.covariance is not None:  # the camera noise κ^(i+1) amplifies, on the target
         sigma = float(np.sqrt(recolor_variance(d, new))[d.target].mean())
         value = float(np.abs(recolor(d, new)[d.target]).mean())
         print(f"predicted σ on the target: {sigma:.4g} (mean), {sigma / max(value, 1e-30):.1%} of its mean value",

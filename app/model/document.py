@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import uuid
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -76,6 +77,7 @@ class Document:
         self._stroke: cmd.Stroke | None = None
         self._dirty_outside_history = False
         self._last_dirty = False
+        self._trusted: dict[str, tuple[Any, str]] = {}  # acquisition key → (TrustedDecomposition or None, why not)
 
     def use_history(self, history) -> None:
         """Move to another (empty) undo stack, e.g. a QUndoStack adapter once on the UI thread."""
@@ -423,7 +425,7 @@ class Document:
         self._warn_unreachable(t, (0, self.shape[0], 0, self.shape[1]), t.mask, True)
 
     # ----------------------------------------------------------------- acquisition
-    def set_acquisition(self, cascade, decomposition, *, key: str | None = None) -> None:
+    def set_acquisition(self, cascade, decomposition, *, key: str | None = None, noise_aware: bool = True) -> None:
         """Record a measured cascade (not undoable; clears the undo history of locked edits).
 
         Parameters
@@ -435,6 +437,8 @@ class Document:
             of it the projector could reach (acquisition drops unreachable pixels).
         key : str, optional
             Id of the measurement (default: a new random one).
+        noise_aware : bool
+            Recolor with the noise-aware recolor once its data is there (:meth:`set_trusted`).
         """
         cascade = tuple(int(u) for u in cascade)
         if not cascade:
@@ -461,6 +465,7 @@ class Document:
             tuple(self.target(u).mask.copy() for u in cascade),
             decomposition,
             key or f"decomposition-{uuid.uuid4().hex[:12]}",
+            noise_aware=bool(noise_aware),
         )
         # Undoing an earlier edit of a now-locked target would break the measurement.
         self.history.clear()
@@ -495,6 +500,59 @@ class Document:
         new = replace(acq, decomposition=decomposition, denoise=radius, measured=None if radius == 0 else acq.raw)
         text = f"Noise reduction {radius} px" if radius else "Noise reduction off"
         self.history.push(cmd.SetMeasurement(self, acq, new, text))
+
+    def set_noise_aware(self, on: bool) -> None:
+        """Recolor noise-aware (:mod:`engine.trust`) or plainly (:func:`engine.recolor.recolor`); one undo step.
+
+        Raises
+        ------
+        InputError
+            Nothing acquired.
+        """
+        acq = self.acquisition
+        if acq is None:
+            raise InputError("nothing is acquired yet: the noise-aware recolor recolors an acquisition")
+        if on and acq.key in self._trusted and self._trusted[acq.key][0] is None:
+            del self._trusted[acq.key]  # asked for again: try again (a cancelled preparation, say)
+        if bool(on) != acq.noise_aware:
+            self.history.push(cmd.SetMeasurement(self, acq, replace(acq, noise_aware=bool(on)),
+                                                 "Noise-aware recolor" if on else "Plain recolor"))
+
+    def set_trusted(self, key: str, trusted, problem: str = "") -> None:
+        """The noise-aware data of acquisition ``key`` (:func:`engine.workflow.load_trusted`), or why there is none.
+
+        Not an edit (computed data, like a decomposition read from the cache): no undo step.
+        ``trusted`` None with ``problem`` (one line) records that this acquisition can only
+        be recolored plainly.
+        """
+        self._trusted[str(key)] = (trusted, str(problem))
+        if self.acquisition is not None and self.acquisition.key == key:
+            self.events.acquisition.emit()
+
+    def needs_trusted(self) -> bool:
+        """The acquisition asks for the noise-aware recolor and its data was neither prepared nor refused."""
+        acq = self.acquisition
+        return acq is not None and acq.noise_aware and acq.key not in self._trusted
+
+    @property
+    def trusted(self):
+        """The noise-aware data the acquisition is recolored with now, or None (recolored plainly)."""
+        acq = self.acquisition
+        if acq is None or not acq.noise_aware:
+            return None
+        return self._trusted.get(acq.key, (None, ""))[0]
+
+    def recolor_note(self) -> str:
+        """One line for the status bar: which recolor is shown, and why when it is not the one asked for."""
+        acq = self.acquisition
+        if acq is None:
+            return ""
+        if not acq.noise_aware:
+            return "plain recolor (View ▸ Noise-Aware Recolor is off)"
+        trusted, problem = self._trusted.get(acq.key, (None, ""))
+        if trusted is not None:
+            return "noise-aware recolor"
+        return f"plain recolor: {problem}" if problem else "plain recolor until the noise-aware one is prepared"
 
     def discard_acquisition(self) -> None:
         """Forget the measurement (one undo step): every κ and mask becomes editable again."""

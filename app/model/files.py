@@ -29,11 +29,13 @@ from engine.progress import checkpoint, report
 from engine.recolor import recolor
 from engine.session import Session
 from engine.session.edit import METADATA_KEY, Edit, EditAcquisition, EditTarget, export_metadata, mask_digest, mask_name
+from engine.trust import recolor_trusted
 from engine.workflow import (
     cached_decomposition,
     denoised_key,
     load_calibration,
     load_decomposition,
+    load_trusted,
     photograph_name,
     save_edit,
     saved_edit,
@@ -41,6 +43,8 @@ from engine.workflow import (
 
 PHOTOGRAPH = "photograph"
 UNREACHABLE = "unreachable"
+#: How an exported image was recolored (its metadata's ``recolor``).
+NOISE_AWARE, PLAIN = "noise-aware", "plain"
 
 class NeedsClipping(InputError):
     """An integer export would have to clip values outside [0, 1]; exporting again with ``clip=True`` allows it.
@@ -156,7 +160,8 @@ def _restore_acquisition(doc: Document, session: Session, edit: Edit) -> list[st
     acq = edit.acquisition
     notes: list[str] = []
     d = load_decomposition(session, acq.decomposition, notes=notes)
-    doc.set_acquisition([doc.by_name(n).uid for n in acq.cascade], d, key=acq.decomposition)
+    doc.set_acquisition([doc.by_name(n).uid for n in acq.cascade], d, key=acq.decomposition,
+                        noise_aware=acq.noise_aware)
     if acq.denoise <= 0:
         return notes
     filtered = cached_decomposition(session, denoised_key(acq.decomposition, acq.denoise), notes)
@@ -216,7 +221,7 @@ def document_edit(document: Document, *, photograph: str | None = None) -> Edit:
         acquisition=None if acq is None else EditAcquisition(
             tuple(document.target(u).name for u in acq.cascade),
             tuple(tuple(float(k) for k in kap) for kap in acq.kappas),
-            acq.key, int(acq.denoise)),
+            acq.key, int(acq.denoise), bool(acq.noise_aware)),
         current=document.target(document.current).name if document.current != -1 else None,
         photograph=photograph,
     )
@@ -276,13 +281,43 @@ def edit_metadata(document: Document) -> dict:
             document_edit(document), source=document.source,
             pixels={t.name: int(np.count_nonzero(t.mask)) for t in document.targets},
             order=None if d is None else d.order, constraint=None if d is None else d.constraint,
+            recolor=None if d is None else (NOISE_AWARE if document.trusted is not None else PLAIN),
         )
     }
 
 
+def recolored_image(document: Document) -> np.ndarray:
+    """The full-resolution recolored image the document shows at rest and exports: noise-aware when its data is
+    ready (:func:`engine.trust.recolor_trusted`), else plain (:func:`engine.recolor.recolor`)."""
+    if document.trusted is not None:
+        return recolor_trusted(document.trusted, document.recolor_kappa()).image
+    return recolor(document.decomposition, document.recolor_kappa())
+
+
+def prepare_trusted(document: Document, session: Session | None, *, progress=None, should_stop=None) -> str:
+    """Give ``document`` the noise-aware data of its acquisition if it asks for it (:func:`load_trusted`).
+
+    For the command line (the app prepares it as a job). Returns "" or the one line saying why
+    the acquisition is recolored plainly (no session, no noise model, a capture missing).
+    """
+    acq = document.acquisition
+    if acq is None or not document.needs_trusted():
+        return ""
+    if session is None:
+        problem = "the noise-aware recolor needs the acquisition's session (its captures and their noise)"
+        document.set_trusted(acq.key, None, problem)
+        return problem
+    try:
+        document.set_trusted(acq.key, load_trusted(session, acq.key, progress=progress, should_stop=should_stop))
+        return ""
+    except SessionError as exc:  # NoNoiseModel, or a capture missing: plain, and say why
+        document.set_trusted(acq.key, None, str(exc))
+        return str(exc)
+
+
 def export_image(document: Document, path, *, dtype: str | None = None, exposure: float = 0.0,
                  clip: bool = False, progress=None, should_stop=None) -> Path:
-    """Write the full-resolution recolored image, with the edit in the file's metadata.
+    """Write the full-resolution recolored image (:func:`recolored_image`), with the edit in the file's metadata.
 
     Parameters
     ----------
@@ -328,7 +363,7 @@ def export_image(document: Document, path, *, dtype: str | None = None, exposure
         raise InputError(f"exposure must be finite, got {exposure!r}")
     meta = edit_metadata(document)
     report(progress, 0, 3, "recoloring at full resolution")
-    image = recolor(document.decomposition, document.recolor_kappa())
+    image = recolored_image(document)
     checkpoint(should_stop, "export")
     report(progress, 1, 3, "converting")
     if ext == ".png":

@@ -8,12 +8,20 @@ recolors the single pixel under the cursor exactly, and for the :class:`Detail` 
 region once the canvas is zoomed in past the preview's resolution. Which view draws what is
 the table in :mod:`app.model.views`.
 
-Renderers are immutable after :meth:`ViewRenderer.prepare` and only read their own copies, so the
-preview worker can render from one on its thread while the user keeps editing.
+With the noise-aware data (``trusted``, :mod:`engine.trust`) the recolored views show
+:func:`engine.trust.recolor_trusted` at full resolution, area-averaged — what export writes. It
+costs about half a second per κ at 512² (bench/trusted.py), so a request marked ``fast`` (a slider
+moving) takes the plain preview path and the exact frame follows when the slider rests
+(:class:`app.qt.preview.PreviewController`).
+
+Renderers are immutable after :meth:`ViewRenderer.prepare` and only read their own copies (the
+noise-aware recolor of the last κ is cached under a lock), so the preview workers can render
+from one on their threads while the user keeps editing.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,6 +30,7 @@ import numpy as np
 from app.model.display import recolor_rgb32, to_rgb32
 from engine.errors import InputError
 from engine.recolor import area_average, prepare_preview, recolor, recolor_preview
+from engine.trust import TrustedRecolor, recolor_trusted
 
 
 @dataclass(frozen=True)
@@ -31,7 +40,8 @@ class Request:
     ``view`` is a :class:`app.model.views.CanvasView`; ``kappa`` is the κ the decomposition is
     recolored with (the last cascade target's); ``edit`` is the whole edit as
     ``((MaskSnapshot, kappa), ...)`` per target, for views that show every target (ground truth,
-    the naive recolor).
+    the naive recolor). ``fast``: recolor plainly even when the noise-aware data is there (a
+    slider moving; the exact frame follows).
     """
 
     view: str
@@ -39,6 +49,7 @@ class Request:
     exposure: float = 0.0
     edit: tuple = ()
     grid: tuple[int, int] = (1, 1)
+    fast: bool = False
 
 
 @dataclass(frozen=True)
@@ -165,12 +176,18 @@ class ViewRenderer:
         error without them, since a lamp dominates the image's norm.
     max_shape : (h, w)
         Largest preview size (the screen, in device pixels).
+    trusted : engine.trust.TrustedDecomposition, optional
+        The acquisition's noise-aware data: the recolored views show
+        :func:`engine.trust.recolor_trusted` (plainly for ``fast`` requests).
     """
 
     def __init__(self, photograph: np.ndarray, decomposition=None, *, truth=None, emitters=None,
-                 max_shape=(1080, 1920)):
+                 max_shape=(1080, 1920), trusted=None):
         self.photograph = photograph
         self.decomposition = decomposition
+        self.trusted = trusted if decomposition is not None else None
+        self._trusted_cache: tuple[tuple, TrustedRecolor] | None = None
+        self._trusted_lock = threading.Lock()
         self.truth = truth
         self.emitters = emitters
         self.shape: tuple[int, int] = photograph.shape[:2]
@@ -217,13 +234,40 @@ class ViewRenderer:
 
         if original or self.decomposition is None:
             return Detail(photo(), (y0, y1, x0, x1), request)
+        if self.exact(request):
+            pixels = to_rgb32(np.ascontiguousarray(self.trusted_recolor(request.kappa).image[y0:y1, x0:x1]),
+                              exposure=request.exposure)
+            return Detail(pixels, (y0, y1, x0, x1), request, second=photo() if split else None)
         pixels = recolor_rgb32(self.decomposition.crop(y0, y1, x0, x1), request.kappa, exposure=request.exposure)
         return Detail(pixels, (y0, y1, x0, x1), request, second=photo() if split else None)
 
-    def recolored_small(self, kappa) -> np.ndarray:
-        """Linear preview of the recolored image (the photograph when nothing is acquired)."""
+    def exact(self, request: Request) -> bool:
+        """Whether ``request`` is drawn with the noise-aware recolor (its data is here and it is not ``fast``)."""
+        return self.trusted is not None and not request.fast
+
+    def trusted_recolor(self, kappa) -> TrustedRecolor:
+        """:func:`engine.trust.recolor_trusted` at full resolution (the last κ's is cached)."""
+        key = tuple(float(k) for k in np.broadcast_to(np.asarray(kappa, float), (3,)))
+        with self._trusted_lock:
+            if self._trusted_cache is None or self._trusted_cache[0] != key:
+                self._trusted_cache = (key, recolor_trusted(self.trusted, key))
+            return self._trusted_cache[1]
+
+    def cached_trusted(self, kappa) -> TrustedRecolor | None:
+        """The noise-aware recolor of ``kappa`` if it is computed already (read-outs never wait for it)."""
+        key = tuple(float(k) for k in np.broadcast_to(np.asarray(kappa, float), (3,)))
+        cached = self._trusted_cache
+        return cached[1] if cached is not None and cached[0] == key else None
+
+    def recolored_small(self, kappa, *, fast: bool = False) -> np.ndarray:
+        """Linear preview of the recolored image (the photograph when nothing is acquired).
+
+        Noise-aware (the area average of :meth:`trusted_recolor`) when its data is here and not ``fast``.
+        """
         if self.pack is None:
             return self.small_photo
+        if self.trusted is not None and not fast:
+            return area_average(self.trusted_recolor(kappa).image, self.factor)
         return recolor_preview(self.pack, kappa)
 
     def naive_small(self, edit) -> np.ndarray:
@@ -304,7 +348,10 @@ class ViewRenderer:
         return canvas, tiles
 
     def pixel(self, x: int, y: int, kappa) -> np.ndarray:
-        """Full-resolution recolored value at one pixel, through :func:`engine.recolor.recolor`."""
+        """Full-resolution recolored value at one pixel: the noise-aware recolor's when it is computed for
+        ``kappa``, else through :func:`engine.recolor.recolor`."""
+        if self.trusted is not None and (done := self.cached_trusted(kappa)) is not None:
+            return done.image[y, x]
         return recolor(self.decomposition.crop(y, y + 1, x, x + 1), kappa)[0, 0]
 
 

@@ -88,6 +88,8 @@ class Measurement:
     ``masks`` are the acquired masks (copies); ``key`` names the measurement (session cache).
     With noise reduction (``denoise`` > 0, :func:`engine.denoise.denoise_components` of that
     radius) ``decomposition`` is the filtered one and ``measured`` the one measured.
+    ``noise_aware``: recolor with :func:`engine.trust.recolor_trusted` once its data is ready
+    (:meth:`app.model.document.Document.set_trusted`), else plainly.
     """
 
     cascade: tuple[int, ...]
@@ -97,6 +99,7 @@ class Measurement:
     key: str
     denoise: int = 0
     measured: Any = None
+    noise_aware: bool = True
 
     @property
     def raw(self):

@@ -89,26 +89,29 @@ def _render_original(r: ViewRenderer, req: Request) -> PreviewFrame:
                         linear=r.small_photo)
 
 
-def _recolored_pixels(r: ViewRenderer, req: Request) -> tuple[np.ndarray, str]:
+def _recolored_pixels(r: ViewRenderer, req: Request) -> tuple[np.ndarray, str, np.ndarray | None]:
     if r.pack is None:
-        return to_rgb32(r.naive_small(req.edit), exposure=req.exposure), NAIVE_BANNER
+        return to_rgb32(r.naive_small(req.edit), exposure=req.exposure), NAIVE_BANNER, None
+    if r.exact(req):  # the noise-aware recolor export writes, area-averaged
+        lin = r.recolored_small(req.kappa)
+        return to_rgb32(lin, exposure=req.exposure), "", lin
     # the hot path: recolor and display conversion fused, no float image in between
-    return recolor_rgb32(r.pack.decomposition, req.kappa, exposure=req.exposure), ""
+    return recolor_rgb32(r.pack.decomposition, req.kappa, exposure=req.exposure), "", None
 
 
 def _render_recolored(r: ViewRenderer, req: Request) -> PreviewFrame:
-    pixels, banner = _recolored_pixels(r, req)
-    return PreviewFrame(CanvasView.RECOLORED, pixels, r.shape, banner=banner)
+    pixels, banner, lin = _recolored_pixels(r, req)
+    return PreviewFrame(CanvasView.RECOLORED, pixels, r.shape, linear=lin, banner=banner)
 
 
 def _render_split(r: ViewRenderer, req: Request) -> PreviewFrame:
-    pixels, banner = _recolored_pixels(r, req)
+    pixels, banner, lin = _recolored_pixels(r, req)
     return PreviewFrame(CanvasView.SPLIT, pixels, r.shape, second=to_rgb32(r.small_photo, exposure=req.exposure),
-                        banner=banner)
+                        linear=lin, banner=banner)
 
 
 def _render_difference(r: ViewRenderer, req: Request) -> PreviewFrame:
-    lin = r.recolored_small(req.kappa) if r.pack is not None else r.naive_small(req.edit)
+    lin = r.recolored_small(req.kappa, fast=req.fast) if r.pack is not None else r.naive_small(req.edit)
     delta = luminance(lin) - luminance(r.small_photo)
     s = robust_max(delta)
     return PreviewFrame(CanvasView.DIFFERENCE, false_colour(delta, -s, s, SIGNED_MAP), r.shape, linear=lin,
@@ -131,7 +134,7 @@ def _render_truth(r: ViewRenderer, req: Request) -> PreviewFrame:
 
 def _render_error(r: ViewRenderer, req: Request) -> PreviewFrame:
     truth_small = area_average(r.truth_full(req.edit), r.factor)
-    lin = r.recolored_small(req.kappa)
+    lin = r.recolored_small(req.kappa, fast=req.fast)
     err = np.abs(luminance(lin) - luminance(truth_small))
     s = robust_max(err)
     note = f"relative error {100 * relative_error(lin, truth_small):.2f} %"
@@ -150,17 +153,24 @@ NO_NOISE_BANNER = ("This acquisition carries no noise model (captured before the
 
 def _render_noise(r: ViewRenderer, req: Request) -> PreviewFrame:
     d = r.pack.decomposition
-    if d.covariance is None:
+    if r.exact(req):  # the σ of the noise-aware recolor shown (its own prediction: noise and remaining bias)
+        done = r.trusted_recolor(req.kappa)
+        sigma, image, target = area_average(done.sigma, r.factor), done.image, r.trusted.target
+        sigma_full, which = done.sigma, " (noise-aware recolor)"
+    elif d.covariance is None:
         return PreviewFrame(CanvasView.NOISE, to_rgb32(r.small_photo, exposure=req.exposure), r.shape,
                             banner=NO_NOISE_BANNER)
-    sigma = np.sqrt(recolor_variance(d, req.kappa))
+    else:
+        sigma = np.sqrt(recolor_variance(d, req.kappa))
+        image, target, sigma_full, which = recolor(d, req.kappa), d.target, sigma, ""
     shown = np.sqrt(np.mean(np.square(sigma), axis=-1))  # RMS over the channels
     s = robust_max(shown)
     note = ""
-    if d.target.any():
-        value = float(np.abs(recolor(d, req.kappa)[d.target]).mean())
-        mean = float(sigma[d.target].mean())
-        note = f"predicted σ on the target: mean {mean:.3g} ({100 * mean / max(value, 1e-30):.2f} % of its value)"
+    if target.any():
+        value = float(np.abs(image[target]).mean())
+        mean = float(sigma_full[target].mean())
+        note = (f"predicted σ on the target{which}: mean {mean:.3g} "
+                f"({100 * mean / max(value, 1e-30):.2f} % of its value)")
     return PreviewFrame(CanvasView.NOISE, false_colour(shown, 0.0, s, MAGNITUDE_MAP), r.shape, linear=sigma,
                         scale=ScaleBar(0.0, s, MAGNITUDE_MAP, "predicted σ of the recolored image (RMS over R, G, B)"),
                         note=note)
@@ -189,6 +199,8 @@ def _read_error(r: ViewRenderer, x: int, y: int, kappa, edit):
 
 
 def _read_noise(r: ViewRenderer, x: int, y: int, kappa, edit):
+    if r.trusted is not None and (done := r.cached_trusted(kappa)) is not None:
+        return "predicted σ (noise-aware)", done.sigma[y, x]
     d = r.decomposition.crop(y, y + 1, x, x + 1)
     if d.covariance is None:
         return "recolored (no noise model)", r.pixel(x, y, kappa)

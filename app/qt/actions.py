@@ -92,6 +92,9 @@ ACTIONS: tuple[ActionSpec, ...] = (
                "document", checkable=True, checked=True),
     ActionSpec("brush_larger", "Larger Brush", "on_brush_larger", "]", "Brush diameter × 1.25", "document"),
     ActionSpec("brush_smaller", "Smaller Brush", "on_brush_smaller", "[", "Brush diameter ÷ 1.25", "document"),
+    ActionSpec("noise_aware", "Noise-&Aware Recolor", "on_noise_aware", None,
+               "Recolor trusting each interaction component only as far as its measured noise allows "
+               "(preview and export); off: the plain κ-weighted sum", "decomposition", checkable=True, checked=True),
     ActionSpec("fit", "&Fit", "on_fit", "Ctrl+0", "The whole image in the window", "document"),
     ActionSpec("zoom_100", "&100 %", "on_zoom_100", "Ctrl+1", "One camera pixel per screen pixel", "document"),
     ActionSpec("zoom_in", "Zoom &In", "on_zoom_in", K.ZoomIn, "", "document"),
@@ -124,7 +127,7 @@ MENUS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("menu_edit", "&Edit", ("undo", "redo")),
     ("menu_targets", "&Targets", ("add_target", "delete_target", "-", "@tools", "-", "brush_larger", "brush_smaller",
                                   "clear_mask", "invert_mask", "refine_edge", "overlays")),
-    ("menu_view", "&View", ("@views", "-", "fit", "zoom_100", "zoom_in", "zoom_out")),
+    ("menu_view", "&View", ("@views", "-", "noise_aware", "-", "fit", "zoom_100", "zoom_in", "zoom_out")),
     ("menu_rig", "&Rig", ("calibrate", "acquire", "discard", "-", "reopen_rig", "close_rig")),
     ("menu_help", "&Help", ("about",)),
 )

@@ -129,7 +129,12 @@ class FileControl(QObject):
         self.export(path, dtype=dtype)
 
     def export(self, path, *, dtype: str | None = None, clip: bool = False) -> None:
-        """Export the full-resolution recolored image on a worker (see :func:`app.model.files.export_image`)."""
+        """Export the full-resolution recolored image on a worker (see :func:`app.model.files.export_image`).
+
+        The noise-aware recolor's data is prepared first when it is asked for and not ready yet, so an export
+        never writes the plain recolor by accident."""
+        if self.w.prepare_trusted_first(lambda: self.export(path, dtype=dtype, clip=clip)):
+            return
         exposure = self.w.exposure_spin.value()
 
         def failed(exc):

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PySide6.QtCore import QSettings, QSignalBlocker, Qt
+from PySide6.QtCore import QSettings, QSignalBlocker, Qt, QTimer
 from PySide6.QtGui import QGuiApplication, QUndoGroup, QUndoStack
 from PySide6.QtWidgets import (
     QApplication,
@@ -44,11 +44,13 @@ from app.qt.preview import PreviewController
 from app.qt.rig_control import RigControl
 from app.qt.undo import QtHistory
 from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
-from engine.errors import InputError
+from engine.errors import InputError, SessionError
 
 APP_NAME = app.APP_NAME
 #: The size the window asks for on a large screen; smaller screens get their available area.
 PREFERRED_SIZE = (1500, 920)
+#: The settings key remembering the user's choice of recolor (View ▸ Noise-Aware Recolor) for new acquisitions.
+NOISE_AWARE_SETTING = "recolor/noise_aware"
 
 
 class MainWindow(QMainWindow):
@@ -135,6 +137,7 @@ class MainWindow(QMainWindow):
         self.readout.setMinimumWidth(380)
         self.readout.setStyleSheet("font-family: monospace;")
         self.note = QLabel(objectName="view_note")
+        self.recolor_mode = QLabel(objectName="recolor_mode")
         self.zoom_label = QLabel(objectName="zoom")
         self.zoom_label.setMinimumWidth(self.zoom_label.fontMetrics().horizontalAdvance("  1600 %"))
         self.zoom_label.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
@@ -142,6 +145,7 @@ class MainWindow(QMainWindow):
         self.progress.label.setMinimumWidth(240)
         self.progress.setMaximumWidth(640)
         sb.addWidget(self.note, 1)  # temporary messages cover this one only
+        sb.addPermanentWidget(self.recolor_mode)
         sb.addPermanentWidget(self.readout)
         sb.addPermanentWidget(self.progress)
         sb.addPermanentWidget(self.zoom_label)
@@ -204,6 +208,7 @@ class MainWindow(QMainWindow):
         ev.dirty.connect(lambda _d: self._update_title())
         ev.warning.connect(lambda m: self.statusBar().showMessage(m, 8000))
         ev.acquisition.connect(self._update_actions)
+        ev.acquisition.connect(self._on_acquisition)
         ev.current.connect(lambda _u: self._update_actions())
         ev.targets.connect(self._update_actions)
         self.rigs.follow_document()
@@ -211,6 +216,7 @@ class MainWindow(QMainWindow):
         self.preview.request()
         self._update_title()
         self._update_actions()
+        self._on_acquisition()
 
     def _teardown(self) -> None:
         if self.doc is not None:  # the document outlives its window: back to a Qt-free history
@@ -288,6 +294,9 @@ class MainWindow(QMainWindow):
         if self.colour_panel is not None:
             self.colour_panel.can_measure = self.condition("rig") and self.session is not None
             self.colour_panel.refresh()
+        acq = None if self.doc is None else self.doc.acquisition
+        self.act_noise_aware.setChecked(acq is None or acq.noise_aware)
+        self.recolor_mode.setText("" if self.doc is None else self.doc.recolor_note())
         if self.doc is not None and self.preview is not None and not self.preview.available(self.preview.view):
             self.set_view(CanvasView.RECOLORED)
 
@@ -454,6 +463,7 @@ class MainWindow(QMainWindow):
             self._update_actions()
             if self.centralWidget() is self._placeholder:
                 self._placeholder.setText(self.PLACEHOLDER)
+            QTimer.singleShot(0, self._prepare_trusted)  # an acquisition may have waited for this job
 
         if on_done is not None:
             job.finished.connect(on_done)
@@ -478,6 +488,72 @@ class MainWindow(QMainWindow):
                 w.setEnabled(not busy)
         stacks = self.undo_group.stacks()
         self.undo_group.setActiveStack(None if busy or not stacks else stacks[-1])
+
+    # ================================================================== noise-aware recolor
+    def noise_aware_default(self) -> bool:
+        """The recolor a new acquisition gets: the user's last choice (View ▸ Noise-Aware Recolor), else noise-aware."""
+        return str(self.settings.value(NOISE_AWARE_SETTING, "true")).lower() not in ("false", "0")
+
+    def on_noise_aware(self, on: bool) -> None:
+        """View ▸ Noise-Aware Recolor: noise-aware or plain recolor for preview and export (one undo step)."""
+        doc = self.doc
+        if doc is None or doc.acquisition is None:
+            return
+        self.settings.setValue(NOISE_AWARE_SETTING, bool(on))
+        self._guard(doc.set_noise_aware, bool(on))
+        QTimer.singleShot(0, self._prepare_trusted)
+
+    def prepare_trusted_first(self, then) -> bool:
+        """Prepare the noise-aware data now if it is asked for and missing, and call ``then`` once that job ended.
+
+        Returns True when ``then`` was deferred (a threaded preparation runs), False when the caller can go on
+        (nothing to prepare, prepared already, or refused with the reason recorded).
+        """
+        if self.doc is None or not self.doc.needs_trusted() or self.job is not None:
+            return False
+        self._prepare_trusted()
+        if self.job is None:
+            return False
+        self.job.ended.connect(lambda: QTimer.singleShot(0, then))
+        return True
+
+    def _on_acquisition(self) -> None:
+        """The acquisition changed: say which recolor is shown; prepare the noise-aware one if it is asked for."""
+        if self.doc is not None:
+            self.recolor_mode.setText(self.doc.recolor_note())
+        QTimer.singleShot(0, self._prepare_trusted)
+
+    def _prepare_trusted(self) -> None:
+        """Prepare the acquisition's noise-aware data as the window's job (once per acquisition; cached in the
+        session), or record why it is recolored plainly (no session)."""
+        from engine.workflow import NoNoiseModel, load_trusted
+
+        doc, session = self.doc, self.session
+        if doc is None or not doc.needs_trusted() or self.job is not None:
+            return  # nothing asked for, or a job runs: its end calls this again
+        key = doc.acquisition.key
+        if session is None:
+            doc.set_trusted(key, None, "the noise-aware recolor needs the acquisition's session (its captures and "
+                                       "their noise): save the document into one, or acquire again")
+            self.statusBar().showMessage(doc.recolor_note(), 8000)
+            return
+
+        def done(trusted):
+            doc.set_trusted(key, trusted)
+
+        def failed(exc):
+            doc.set_trusted(key, None, str(exc) or type(exc).__name__)
+            self.statusBar().showMessage(doc.recolor_note(), 12000)
+            if not isinstance(exc, (NoNoiseModel, SessionError, InputError)):
+                self.show_error("Noise-aware recolor", exc)
+
+        def cancelled(_exc):
+            doc.set_trusted(key, None, "its preparation was cancelled (View ▸ Noise-Aware Recolor off and on "
+                                       "prepares it again)")
+
+        job = self.run_job(load_trusted, session, key, name="Preparing the noise-aware recolor", on_done=done,
+                           on_failed=failed)
+        job.cancelled.connect(cancelled)
 
     # ================================================================== colour
     def measure_checker(self) -> None:

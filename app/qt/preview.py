@@ -12,9 +12,17 @@ resolution (:func:`app.model.views.render_detail`) on a second worker once the p
 has been still for :attr:`PreviewController.DETAIL_DELAY_MS`, and arrives through
 :attr:`PreviewController.detail_ready`: drags stay on the fast screen-sized path, and what the
 user inspects at 100 % is the export's pixels.
+
+With the noise-aware recolor (the document's ``trusted`` data, :mod:`engine.trust`) a frame
+costs about half a second at 512² instead of 4 ms (bench/trusted.py): every change is first drawn on the
+fast plain path (a ``fast`` request), and once the picture has been still for
+:attr:`PreviewController.EXACT_DELAY_MS` the exact noise-aware frame — what export writes — is
+rendered on a third worker and replaces it.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from PySide6.QtCore import QObject, QTimer, Signal
@@ -51,6 +59,8 @@ class PreviewController(QObject):
 
     #: Stillness before the full-resolution detail is rendered (ms).
     DETAIL_DELAY_MS = 120
+    #: Stillness before the noise-aware frame replaces the fast plain one (ms).
+    EXACT_DELAY_MS = 150
     #: Largest detail region (camera pixels); bigger regions keep the preview alone.
     MAX_DETAIL_PIXELS = 4_000_000
     #: Preview pixels magnified at least this much on screen get a detail.
@@ -70,6 +80,13 @@ class PreviewController(QObject):
         self.detail_worker = LatestWorker(self._render_detail, synchronous=synchronous, parent=self)
         self.detail_worker.done.connect(self._on_detail)
         self.detail_worker.failed.connect(self._on_failed)
+        self.exact_worker = LatestWorker(self._render, synchronous=synchronous, parent=self)
+        self.exact_worker.done.connect(self._on_exact)
+        self.exact_worker.failed.connect(self._on_failed)
+        self._exact_timer = QTimer(self)
+        self._exact_timer.setSingleShot(True)
+        self._exact_timer.setInterval(self.EXACT_DELAY_MS)
+        self._exact_timer.timeout.connect(self._submit_exact)
         self.viewport: tuple[tuple[int, int, int, int], float] | None = None
         self.detail: Detail | None = None  # the newest detail of the current request
         self._detail_timer = QTimer(self)
@@ -135,15 +152,21 @@ class PreviewController(QObject):
         truth = self._truth if self.doc.truth is not None else None
         emitters = getattr(self.doc.truth, "emitters", None)
         self.renderer = ViewRenderer(self.doc.photograph, self.doc.decomposition, truth=truth,
-                                 emitters=emitters() if callable(emitters) else None, max_shape=self.max_shape)
+                                     emitters=emitters() if callable(emitters) else None, max_shape=self.max_shape,
+                                     trusted=self.doc.trusted)
         self.request()
 
     def request(self) -> int:
         """Ask for a frame of the current state; returns the request id."""
         req = Request(self.view, tuple(float(k) for k in self.doc.recolor_kappa()), self.exposure,
                       self._edit() if self._shows_edit() else (), self.grid)
+        if self.renderer is not None and self.renderer.trusted is not None and not self.worker.synchronous:
+            req = replace(req, fast=True)  # the plain path now, the exact frame when the picture is still
+            self._exact_timer.start()
         self.last_request = req
         self.last_id = self.worker.submit((self.generation, self.renderer, req))
+        if req.fast:
+            return self.last_id
         self._schedule_detail()
         return self.last_id
 
@@ -159,8 +182,10 @@ class PreviewController(QObject):
 
     def close(self) -> None:
         self._detail_timer.stop()
+        self._exact_timer.stop()
         self.worker.close()
         self.detail_worker.close()
+        self.exact_worker.close()
 
     # ------------------------------------------------------------------ internals
     @staticmethod
@@ -177,6 +202,22 @@ class PreviewController(QObject):
         if detail is not None:
             detail.generation = generation
         return detail
+
+    def _submit_exact(self) -> None:
+        if self.last_request is None or not self.last_request.fast:
+            return
+        self.last_request = replace(self.last_request, fast=False)
+        self.exact_worker.submit((self.generation, self.renderer, self.last_request))
+        self._schedule_detail()
+
+    def _on_exact(self, rid: int, frame: PreviewFrame) -> None:
+        if frame.generation != self.generation or frame.request != self.last_request:
+            return  # the picture changed since: a newer fast frame is on screen, its exact one comes later
+        frame.request_id = self._shown_id
+        self.frame = frame
+        self.frame_ready.emit(frame)
+        if self.detail is not None:
+            self.detail_ready.emit(self.detail)
 
     def _schedule_detail(self) -> None:
         if not self.wants_detail():
@@ -198,6 +239,10 @@ class PreviewController(QObject):
     def _on_done(self, rid: int, frame: PreviewFrame) -> None:
         if frame.generation != self.generation or rid <= self._shown_id:
             return  # stale: a newer frame is on screen, or the renderer was replaced
+        shown = self.frame
+        if (frame.request is not None and frame.request.fast and shown is not None and shown.request is not None
+                and shown.generation == frame.generation and shown.request == replace(frame.request, fast=False)):
+            return  # the exact frame of this very picture is on screen already
         self._shown_id = rid
         frame.request_id = rid
         self.frame = frame

@@ -300,7 +300,7 @@ class RigControl(QObject):
         by_name = {t.name: t.uid for t in doc.targets}
         try:
             cascade = [by_name[name] for name, _ in result.targets]
-            doc.set_acquisition(cascade, result.decomposition, key=result.key)
+            doc.set_acquisition(cascade, result.decomposition, key=result.key, noise_aware=self.w.noise_aware_default())
         except (KeyError, InputError, SessionError) as exc:
             self.w.show_error("Cannot use the acquisition", exc)
             return

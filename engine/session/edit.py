@@ -9,14 +9,17 @@ One schema, owned by the engine and used by the app, ``albedit recolor``, ``expo
      "current": "target 1",
      "photograph": "acq-photograph",
      "acquisition": {"cascade": ["floor", "target 1"], "kappas": [[...], [...]],
-                     "decomposition": "<cache key>", "denoise": 0}}
+                     "decomposition": "<cache key>", "denoise": 0, "noise_aware": true}}
 
 Target names are display names: any text a user can type (``"target 1"``, ``"Wand — links"``).
 Their masks are stored under a safe file name derived from the name and the mask's content
 (:func:`mask_name`), so every name is accepted everywhere and a save that rewrites a mask
 never touches the file an older save still refers to. The cascade lists acquired targets
 first to last; the last one's κ is free, the others' were fixed before capture (Sec. 4), and
-``kappas`` records every cascade target's κ at acquisition.
+``kappas`` records every cascade target's κ at acquisition. ``noise_aware`` chooses the
+recolor: the noise-aware one (:mod:`engine.trust`, the default of every new acquisition) or
+the plain κ-weighted sum (:func:`engine.recolor.recolor`). An edit saved before the choice
+existed has no ``noise_aware`` and reads as ``false``: it exports the image it exported then.
 
 Older sessions still open: the app's ``state["edits"]`` (version 1) is read by
 :meth:`Edit.from_json` too; the command line's old ``state["edit"] = {"kappa": [...]}``
@@ -70,7 +73,7 @@ _EDIT_FIELDS = Obj(required={
         "kappas": List(_KAPPA, min_len=1),
         "decomposition": _CACHE_KEY,
         "denoise": Int(0, MAX_RADIUS),
-    })),
+    }, optional={"noise_aware": Bool()})),
 })
 
 
@@ -202,13 +205,18 @@ class EditAcquisition:
     decomposition : str
         Session cache key of the last target's decomposition.
     denoise : int
-        Noise-reduction radius in pixels (0: off), see :func:`engine.denoise.denoise_components`.
+        Noise-reduction radius in pixels (0: off), see :func:`engine.denoise.denoise_components`;
+        it filters the plain recolor's decomposition.
+    noise_aware : bool
+        Recolor with :func:`engine.trust.recolor_trusted` (True) or plainly with
+        :func:`engine.recolor.recolor` (False: also what edits saved before the choice read as).
     """
 
     cascade: tuple[str, ...]
     kappas: tuple[tuple[float, float, float], ...]
     decomposition: str
     denoise: int = 0
+    noise_aware: bool = False
 
 
 @dataclass(frozen=True)
@@ -268,6 +276,7 @@ class Edit:
                 "kappas": [[float(k) for k in kap] for kap in acq.kappas],
                 "decomposition": acq.decomposition,
                 "denoise": int(acq.denoise),
+                "noise_aware": bool(acq.noise_aware),
             },
         }
 
@@ -292,7 +301,8 @@ class Edit:
             targets=tuple(EditTarget(t["name"], t["mask"], tuple(t["kappa"]),
                                      None if "colour" not in t else tuple(t["colour"])) for t in data["targets"]),
             acquisition=None if acq is None else EditAcquisition(
-                tuple(acq["cascade"]), tuple(tuple(k) for k in acq["kappas"]), acq["decomposition"], acq["denoise"]),
+                tuple(acq["cascade"]), tuple(tuple(k) for k in acq["kappas"]), acq["decomposition"], acq["denoise"],
+                bool(acq.get("noise_aware", False))),
             current=data["current"],
             photograph=data["photograph"],
         )
@@ -341,7 +351,7 @@ def _check_consistent(data: dict, where: str) -> None:
 
 
 def export_metadata(edit: Edit, *, source: str, pixels: dict[str, int], order: int | None,
-                    constraint: str | None) -> dict:
+                    constraint: str | None, recolor: str | None = None) -> dict:
     """The edit as an exported image carries it under :data:`METADATA_KEY`.
 
     Parameters
@@ -355,12 +365,14 @@ def export_metadata(edit: Edit, *, source: str, pixels: dict[str, int], order: i
         K of the decomposition recolored (None: nothing acquired).
     constraint : str or None
         The decomposition's constraint mode.
+    recolor : str or None
+        The recolor the image was made with: ``"noise-aware"``, ``"plain"`` (None: nothing acquired).
 
     Returns
     -------
     dict
         ``{"version", "source", "targets": [{"name", "kappa", "pixels", "cascade_position",
-        "acquired"}], "cascade", "kappa", "order", "constraint", "denoise"}``; exporters add
+        "acquired"}], "cascade", "kappa", "order", "constraint", "denoise", "recolor"}``; exporters add
         ``"display"`` (8-bit files) or ``"linear"`` (float and 16-bit files).
     """
     cascade = [] if edit.acquisition is None else list(edit.acquisition.cascade)
@@ -377,4 +389,5 @@ def export_metadata(edit: Edit, *, source: str, pixels: dict[str, int], order: i
         "order": None if order is None else int(order),
         "constraint": None if constraint is None else str(constraint),
         "denoise": 0 if edit.acquisition is None else int(edit.acquisition.denoise),
+        "recolor": None if recolor is None else str(recolor),
     }

@@ -13,7 +13,8 @@ rather than repeating their checks:
   cache key;
 - :mod:`~engine.workflow.decomposition`: :func:`load_decomposition` reads a decomposition from
   the session's cache, or recomputes it from the session's own captures when the cache is
-  gone or unusable (no rig needed);
+  gone or unusable (no rig needed); :mod:`~engine.workflow.trusted`: :func:`load_trusted`
+  does the same for the noise-aware recolor's data (:mod:`engine.trust`);
 - :mod:`~engine.workflow.colour`: :func:`run_checker` measures a colour checker into the
   session, :func:`target_colour` tells a target's colour and, with the checker, its absolute
   albedo (each target's D is kept by :func:`run_capture`);
@@ -61,12 +62,14 @@ from engine.workflow.decomposition import (
     photograph_name,
 )
 from engine.workflow.edit import edit_from_plan, save_edit, saved_edit
+from engine.workflow.trusted import NoNoiseModel, load_trusted, trusted_key
 
 __all__ = [
-    "MAX_FRAMES", "RELATIVE", "CaptureResult", "Preflight", "Unreachable", "adopt_calibration", "cached_decomposition",
+    "MAX_FRAMES", "RELATIVE", "CaptureResult", "NoNoiseModel", "Preflight", "Unreachable", "adopt_calibration",
+    "cached_decomposition",
     "calibration_problems", "capture_plan", "check_frames", "check_rig", "check_targets", "decomposition_key",
     "denoised_key", "edit_from_plan", "estimated_report", "load_calibration", "load_compatible_calibration",
-    "load_decomposition", "noise_reduced", "open_session_for_rig", "photograph_name", "preflight",
+    "load_decomposition", "load_trusted", "noise_reduced", "open_session_for_rig", "photograph_name", "preflight",
     "run_calibration", "run_capture", "run_checker", "save_calibration", "save_edit", "saved_checker", "saved_edit",
-    "store_directs", "target_albedo", "target_colour", "target_direct",
+    "store_directs", "target_albedo", "target_colour", "target_direct", "trusted_key",
 ]

@@ -12,7 +12,7 @@ import importlib.metadata
 import json
 from dataclasses import dataclass
 
-from engine.acquire import Adaptive, CaptureSettings, Recorder, acquire_cascade
+from engine.acquire import Adaptive, CaptureSettings, CascadeResult, Recorder, acquire_cascade
 from engine.decompose import Decomposition
 from engine.denoise import denoise_components
 from engine.errors import DeviceError, InputError, SessionError
@@ -23,7 +23,7 @@ from engine.workflow.calibration import load_calibration
 
 __all__ = [
     "DECOMPOSITION_VERSION", "cached_decomposition", "decomposition_key", "denoised_key", "load_decomposition",
-    "noise_reduced", "photograph_name",
+    "noise_reduced", "photograph_name", "reacquired",
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
@@ -180,6 +180,18 @@ class _OfflineRig:
 
 
 def _recompute(session: Session, rig=None) -> Decomposition:
+    result = reacquired(session, rig)
+    return result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
+
+
+def reacquired(session: Session, rig=None, *, should_stop=None) -> CascadeResult:
+    """The session's acquisition rebuilt from its own captures (no rig needed when they are all there).
+
+    Raises
+    ------
+    SessionError
+        No acquisition in the session, or a capture its plan needs is missing.
+    """
     plan = session.state.get("plan")
     if plan is None:
         raise SessionError(f"session {session.path} has no acquisition: run `albedit capture` first")
@@ -190,10 +202,9 @@ def _recompute(session: Session, rig=None) -> Decomposition:
         targets.append((name, session.read_mask(stored if stored in masks else name)))  # older sessions: by name
     settings = CaptureSettings.from_dict(plan["settings"])
     adaptive = None if plan["adaptive"] is None else Adaptive(**plan["adaptive"])
-    recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session)
-    result = acquire_cascade(recorder, load_calibration(session), targets, plan["order"],
-                             fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive)
-    return result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
+    recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session, should_stop=should_stop)
+    return acquire_cascade(recorder, load_calibration(session), targets, plan["order"],
+                           fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive)
 
 
 def photograph_name(session: Session, edit: Edit | None = None) -> str:

@@ -35,12 +35,15 @@ def saved_edit(session: Session) -> Edit | None:
     plan = state.get("plan")
     if plan is None or state.get("status") != "captured":
         return None
-    kappa = edit["kappa"] if isinstance(edit, dict) else (1.0, 1.0, 1.0)
-    return edit_from_plan(session, kappa)
+    if isinstance(edit, dict):  # the command line's old edit: recolored plainly, as it was then
+        return edit_from_plan(session, edit["kappa"], noise_aware=False)
+    return edit_from_plan(session)
 
 
-def edit_from_plan(session: Session, kappa=(1.0, 1.0, 1.0), *, denoise: int = 0) -> Edit:
+def edit_from_plan(session: Session, kappa=(1.0, 1.0, 1.0), *, denoise: int = 0, noise_aware: bool = True) -> Edit:
     """The edit of a captured plan: its targets with their fixed κ, the last one with ``kappa``.
+
+    ``noise_aware`` (default True, as for every new acquisition) chooses the noise-aware recolor.
 
     Raises
     ------
@@ -58,7 +61,8 @@ def edit_from_plan(session: Session, kappa=(1.0, 1.0, 1.0), *, denoise: int = 0)
         targets.append(EditTarget(name, stored if stored in masks or name not in masks else name, kap))
     cascade = tuple(plan["targets"])
     return Edit(targets=tuple(targets), current=cascade[-1],
-                acquisition=EditAcquisition(cascade, tuple(kappas), decomposition_key(session), int(denoise)))
+                acquisition=EditAcquisition(cascade, tuple(kappas), decomposition_key(session), int(denoise),
+                                            bool(noise_aware)))
 
 
 def save_edit(session: Session, edit: Edit) -> None:

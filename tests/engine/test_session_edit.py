@@ -147,7 +147,28 @@ def test_export_metadata_is_the_edit_as_files_carry_it():
             {"name": "target 1", "kappa": [2.0, 0.125, 8.0], "pixels": 0, "cascade_position": 2, "acquired": True},
         ],
         "cascade": ["floor", "target 1"], "kappa": [2.0, 0.125, 8.0], "order": 4, "constraint": "ordered", "denoise": 3,
+        "recolor": None,
     }
+    assert export_metadata(_edit(), source="s", pixels={}, order=4, constraint="ordered",
+                           recolor="noise-aware")["recolor"] == "noise-aware"
+
+
+def test_the_recolor_choice_is_saved_and_older_edits_read_as_plain(tmp_path):
+    from dataclasses import replace
+
+    edit = _edit()
+    aware = replace(edit, acquisition=replace(edit.acquisition, noise_aware=True))
+    assert Edit.from_json(aware.to_json()) == aware and aware.to_json()["acquisition"]["noise_aware"] is True
+    old = aware.to_json()
+    del old["acquisition"]["noise_aware"]  # written before the choice existed: it exported the plain recolor
+    assert Edit.from_json(old).acquisition.noise_aware is False
+    with pytest.raises(InputError, match="noise_aware"):
+        Edit.from_json({**old, "acquisition": {**old["acquisition"], "noise_aware": "yes"}})
+    session = _session(tmp_path / "s")
+    _captured_plan(session)
+    assert saved_edit(session).acquisition.noise_aware  # a fresh capture: the noise-aware default
+    session.update(edit={"kappa": [2.0, 0.125, 8.0]})  # the command line's old edit: plain, as it was
+    assert not saved_edit(Session.open(tmp_path / "s")).acquisition.noise_aware
 
 
 def _decomposition() -> Decomposition:

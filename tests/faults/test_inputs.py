@@ -13,9 +13,9 @@ from engine.acquire import Recorder
 from engine.decompose import Decomposition
 from engine.errors import Cancelled, InputError
 from engine.imageio import read_image, read_mask, write_image
-from engine.recolor import recolor
 from engine.session import Session
-from engine.workflow import load_decomposition
+from engine.trust import recolor_trusted
+from engine.workflow import load_trusted
 from tests.faults.conftest import captures_of, refused
 
 # ----------------------------------------------------------------------------- 9: noise per frame
@@ -216,5 +216,5 @@ def test_recolor_of_a_read_only_session_writes_its_image_warns_and_succeeds(capt
     assert "the edit was not saved in the session" in lines[-1] and "read-only" in lines[-1]
     assert (captured / "manifest.json").read_bytes() == before
     monkeypatch.undo()
-    expected = recolor(load_decomposition(Session.open(captured)), (3, 0.5, 1))
+    expected = recolor_trusted(load_trusted(Session.open(captured)), (3, 0.5, 1)).image  # the default recolor
     np.testing.assert_allclose(read_image(tmp_path / "out.exr"), expected, rtol=1e-6)

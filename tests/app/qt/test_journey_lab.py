@@ -138,6 +138,8 @@ def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monk
     assert relative_error(recolor(doc.decomposition, kappa), truth, surfaces) < 0.01
     qtbot.waitUntil(lambda: window.preview.frame is not None and window.preview.frame.request.kappa == tuple(kappa),
                     timeout=TIMEOUT_MS)
+    # the noise-aware recolor is prepared after the acquisition (a job in the status bar): wait for it to end
+    qtbot.waitUntil(lambda: window.job is None and doc.trusted is not None, timeout=TIMEOUT_MS)
 
     # the same after File ▸ Open of another session: the open rig stays, calibrate again, acquire
     other = Document(photo, source="another photograph")

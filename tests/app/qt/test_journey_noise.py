@@ -1,6 +1,6 @@
 """J6, the artist checks where an edit is unreliable: the demo on the realistic rig → drag κ →
 View ▸ Predicted Noise (σ) → the canvas shows the engine's predicted standard deviation of the
-recolored image, and follows κ.
+(plain) recolored image, and follows κ.
 
 Driven through the real window only (tests/app/qt/user.py); the demo's rig is the realistic one
 (camera noise, half-resolution projector) made small (48²).
@@ -32,6 +32,10 @@ def test_the_artist_sees_the_predicted_noise_of_the_edit(make_window, qtbot, mon
     wall = doc.by_name("right_wall")
     d = doc.decomposition
     assert d is not None and d.covariance is not None  # the realistic camera's noise was measured and carried
+    # the plain recolor's σ here (the noise-aware recolor's own σ: test_journey_noise_aware.py)
+    user.wait_until(lambda: user.find("recolor_mode", QLabel).text() == "noise-aware recolor")
+    user.trigger("noise_aware")
+    assert user.find("recolor_mode", QLabel).text().startswith("plain recolor")
 
     # drag κ (linked) on the acquired wall, then look at the predicted noise
     user.select_row(user.find("targets_list"), 2)

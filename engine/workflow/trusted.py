@@ -1,0 +1,108 @@
+"""The session's noise-aware recolor data (:mod:`engine.trust`): cached, else prepared from its captures.
+
+The noise-aware recolor needs the acquisition's observations and their covariance, not only
+the decomposition. They are rebuilt from the session's own captures (the plan's cascade run
+offline, :func:`engine.workflow.decomposition.reacquired`), the last target's
+:meth:`engine.acquire.PreparedTarget.trust` smooths every order's shares once, and the result
+is cached under :func:`trusted_key` of the decomposition's key — a changed acquisition has
+another key, so it is prepared again. κ comes later: :func:`engine.trust.recolor_trusted`.
+"""
+
+from __future__ import annotations
+
+from engine.errors import InputError, SessionError
+from engine.progress import Progress, ShouldStop, checkpoint, report
+from engine.session import Session
+from engine.trust import TrustedDecomposition
+from engine.workflow.decomposition import decomposition_key, reacquired
+
+__all__ = ["NoNoiseModel", "TRUST_VERSION", "load_trusted", "trusted_key"]
+
+#: Bump when the noise-aware preparation's maths or layout change: older cache entries are prepared again.
+TRUST_VERSION = 1
+
+
+class NoNoiseModel(SessionError):
+    """The acquisition carries no camera-noise model, so only the plain recolor is possible."""
+
+
+def trusted_key(key: str) -> str:
+    """Cache key of the noise-aware data of the decomposition cached under ``key``.
+
+    Examples
+    --------
+    >>> trusted_key("decomposition-0123456789abcdef")
+    'decomposition-0123456789abcdef-trusted1'
+    """
+    return f"{key}-trusted{TRUST_VERSION}"
+
+
+def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: list[str] | None = None,
+                 progress: Progress | None = None, should_stop: ShouldStop | None = None) -> TrustedDecomposition:
+    """The session's acquisition ready for :func:`engine.trust.recolor_trusted`: cached, else prepared.
+
+    Parameters
+    ----------
+    session : Session
+    key : str, optional
+        The decomposition's cache key (a saved edit's); default
+        :func:`engine.workflow.decomposition_key` of the session's plan.
+    rig : RigLike, optional
+        Where to take captures the session lacks (normally none).
+    notes : list of str, optional
+        Receives a line when a cache entry was unusable and the data was prepared again.
+    progress, should_stop
+        :mod:`engine.progress` conventions.
+
+    Returns
+    -------
+    TrustedDecomposition
+        Of the last cascade target (earlier targets' κ are already in its observations).
+
+    Raises
+    ------
+    NoNoiseModel
+        The captures carry no noise model (the camera's noise was not measured before they
+        were taken): only the plain recolor is possible.
+    SessionError
+        No acquisition in the session, or a capture needed is missing.
+    Cancelled
+        Stopped on request.
+
+    Notes
+    -----
+    Preparing costs seconds (bench/trusted.py: 11 s at 512², order 4, on this 2-core
+    machine); reading the cache entry back costs milliseconds. A session that cannot be
+    written (read-only, locked) still gets the result, uncached.
+    """
+    name = trusted_key(key or decomposition_key(session))
+    arrays = session.cache_get(name)
+    if arrays is not None:
+        try:
+            trusted = TrustedDecomposition.from_arrays(arrays)
+            if trusted.photograph.shape[:2] != tuple(session.camera_resolution):
+                raise InputError(f"it is {trusted.photograph.shape[:2]}, the session {session.camera_resolution}")
+            return trusted
+        except InputError as exc:
+            if notes is not None:
+                notes.append(f"the cached noise-aware data {name!r} was unusable ({exc}); prepared it again")
+            try:
+                session.cache_discard(name)
+            except (OSError, SessionError):
+                pass
+    report(progress, 0, 2, "reading the acquisition's captures")
+    result = reacquired(session, rig, should_stop=should_stop)
+    acq = result.acquisition
+    if acq.covariance is None:
+        raise NoNoiseModel(f"the acquisition in {session.path} carries no noise model (captured before the camera's "
+                           "noise was measured): recolored plainly; recalibrate and capture again for the "
+                           "noise-aware recolor")
+    checkpoint(should_stop, "preparing the noise-aware recolor")
+    report(progress, 1, 2, "smoothing the interaction shares (once per acquisition)")
+    trusted = result.targets[-1][1].trust(acq.observations, acq.covariance, should_stop=should_stop)
+    try:
+        session.cache_put(name, trusted.to_arrays())
+    except (OSError, SessionError):
+        pass  # a read-only session: the result is returned all the same
+    report(progress, 2, 2, "noise-aware recolor ready")
+    return trusted
