@@ -104,6 +104,17 @@ def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_pa
         return capture()
 
     monkeypatch.setattr(rig.camera, "capture", gated_capture)
+    # and the test sees when the worker parks at the pause (it may do so before its second shot)
+    from app.qt.worker import Job
+
+    parked, should_stop = threading.Event(), Job.should_stop
+
+    def watched(job):
+        if job.is_paused:
+            parked.set()
+        return should_stop(job)
+
+    monkeypatch.setattr(Job, "should_stop", watched)
     panel = make_panel(rig, session, [("right_wall", rig.targets["right_wall"])])
     panel.order.setValue(2)
     assert panel.start_button.text() == "Start" and not panel.threshold.isEnabled()
@@ -115,7 +126,10 @@ def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_pa
     qtbot.waitUntil(lambda: bool(started) and started[0].is_paused, timeout=TIMEOUT_MS)
     assert panel.pause_button.text() == "Resume" and not panel.start_button.isEnabled()
     assert not panel.order.isEnabled()  # settings are locked while a run holds the rig
-    go.set()  # the worker may be held before its second shot or right after it: either way, it is held
+    # the worker is held either in its second shot (by the gate) or at the pause before it; a loaded
+    # machine may take a while to get it to either place
+    qtbot.waitUntil(lambda: len(shots) == 2 or parked.is_set(), timeout=TIMEOUT_MS)
+    go.set()
     qtbot.waitUntil(lambda: len(_acq(session)) == len(shots), timeout=TIMEOUT_MS)
     held = len(_acq(session))
     qtbot.wait(200)
