@@ -119,14 +119,21 @@ def cached_decomposition(session: Session, key: str, notes: list[str] | None = N
         if d.shape[:2] != (h, w):
             raise InputError(f"it is {d.shape[1]}×{d.shape[0]}, the session {w}×{h}")
     except InputError as exc:
-        if notes is not None:
-            notes.append(f"the cached decomposition {key!r} was unusable ({exc}); recomputed it from the captures")
-        try:
-            session.cache_discard(key)
-        except (OSError, SessionError):
-            pass
+        discard_unusable(session, key, f"the cached decomposition {key!r} was unusable ({exc}); recomputed it "
+                         "from the captures", notes)
         return None
     return d
+
+
+def discard_unusable(session: Session, key: str, note: str, notes: list[str] | None) -> None:
+    """Delete the unusable cache entry ``key`` (best effort: a read-only session keeps it) and
+    append ``note`` to ``notes``."""
+    if notes is not None:
+        notes.append(note)
+    try:
+        session.cache_discard(key)
+    except (OSError, SessionError):
+        pass
 
 
 def _cache_best_effort(session: Session, key: str, d: Decomposition) -> None:

@@ -14,7 +14,7 @@ from engine.errors import InputError, SessionError
 from engine.progress import Progress, ShouldStop, checkpoint, report
 from engine.session import Session
 from engine.trust import TrustedDecomposition
-from engine.workflow.decomposition import decomposition_key, reacquired
+from engine.workflow.decomposition import decomposition_key, discard_unusable, reacquired
 
 __all__ = ["NoNoiseModel", "TRUST_VERSION", "load_trusted", "trusted_key"]
 
@@ -84,12 +84,8 @@ def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: l
                 raise InputError(f"it is {trusted.photograph.shape[:2]}, the session {session.camera_resolution}")
             return trusted
         except InputError as exc:
-            if notes is not None:
-                notes.append(f"the cached noise-aware data {name!r} was unusable ({exc}); prepared it again")
-            try:
-                session.cache_discard(name)
-            except (OSError, SessionError):
-                pass
+            discard_unusable(session, name, f"the cached noise-aware data {name!r} was unusable ({exc}); prepared "
+                             "it again", notes)
     report(progress, 0, 2, "reading the acquisition's captures")
     result = reacquired(session, rig, should_stop=should_stop)
     acq = result.acquisition
