@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
@@ -79,6 +80,18 @@ def resolution(text: str) -> tuple[int, int]:
     if len(parts) != 2 or min(parts) < 8:
         raise argparse.ArgumentTypeError(f"resolution must be N or HxW with sides >= 8, got {text!r}")
     return parts[0], parts[1]
+
+
+def output_image(text: str) -> Path:
+    """Parse ``-o PATH``: an image format Albedit exports, in a folder that exists (checked before any work)."""
+    from app.model.files import EXPORT_FORMATS
+
+    path = Path(text)
+    if path.suffix.lower() not in EXPORT_FORMATS:
+        raise argparse.ArgumentTypeError(f"output must end in one of {sorted(EXPORT_FORMATS)}, got {text!r}")
+    if not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"no folder {str(path.parent)!r} to write {path.name!r} into")
+    return path
 
 
 def add_rig_options(parser) -> None:

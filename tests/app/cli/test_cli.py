@@ -73,6 +73,8 @@ def test_demo_runs_on_the_path_traced_rig(tmp_path):
         (["recolor", "{tmp}/nowhere", "--kappa", "1", "-o", "{tmp}/x.exr"], "no session folder"),
         (["recolor", "{tmp}", "--kappa", "-1", "-o", "{tmp}/x.exr"], "non-negative"),
         (["capture", "{tmp}/nowhere", "--target", "right_wall"], "no session folder"),
+        (["recolor", "{tmp}", "--kappa", "2", "-o", "{tmp}/x.bmp"], "output must end in one of"),
+        (["export", "{tmp}", "-o", "{tmp}/nowhere/x.exr"], "no folder"),
         (["calibrate", "{tmp}/s", "--rig", "nosuch:0"], "unknown rig backend"),
         (["demo", "-o", "{tmp}/d", "--target", "ceiling", "--resolution", "16"], "has no target"),
         (["demo", "-o", "{tmp}/d", "--rig", "opencv:0"], "must be a rig with ground truth"),
