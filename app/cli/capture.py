@@ -14,6 +14,7 @@ from engine.errors import InputError
 from engine.imageio import read_mask
 from engine.noise import packed_index
 from engine.session import Session
+from engine.session.paths import MANIFEST
 from engine.workflow import (
     adopt_calibration,
     check_targets,
@@ -70,7 +71,8 @@ def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
 
 
 def run(args) -> int:
-    recorded = Session.open(args.session if args.calibration is None else args.calibration)
+    source = args.session if args.calibration is None else args.calibration
+    recorded = Session.open(source) if (source / MANIFEST).is_file() else None  # else refused below, masks first
     with open_rig(args, recorded) as rig:
         targets = _targets(args, rig)
         check_targets(targets, tuple(rig.camera.resolution))  # before any folder is made or capture taken
@@ -79,7 +81,7 @@ def run(args) -> int:
             session = open_session_for_rig(args.session, rig)
             adopt_calibration(session, calibration)
         else:
-            session = recorded
+            session = recorded or Session.open(args.session)
             session.recover_orphans()
         report_session(session, "capture")
         flood = None

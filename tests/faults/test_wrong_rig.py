@@ -59,11 +59,11 @@ def test_another_scene_content_is_another_set_up(open_rig, tmp_path, tally):
 
 def test_the_command_line_refuses_reusing_a_calibration_of_another_set_up(tmp_path, albedit, tally):
     rig = ["--rig", "virtual:cornell", "--resolution", "24"]
-    assert albedit("calibrate", tmp_path / "cal", *rig, "--ideal", "--levels", "5")[0] == 0
+    assert albedit("calibrate", tmp_path / "cal", *rig, "--levels", "5")[0] == 0  # realistic
+    # options not given are the calibration's (tests/app/cli); one given that differs is refused
     tally.injected += 1
-    refused(albedit, tally, "capture", tmp_path / "new", *rig, "--calibration", tmp_path / "cal",
-            "--target", "right_wall", "--order", "2",
-            match="ideal True then, False now; supersample 1 then, 4 now; recalibrate")
+    refused(albedit, tally, "capture", tmp_path / "new", *rig, "--ideal", "--calibration", tmp_path / "cal",
+            "--target", "right_wall", "--order", "2", match="ideal False then, True now; recalibrate")
     assert not (tmp_path / "new").exists()
-    refused(albedit, tally, "capture", tmp_path / "cal", *rig, "--target", "right_wall", "--order", "2",
-            match="ideal True then, False now")
+    refused(albedit, tally, "capture", tmp_path / "cal", *rig, "--projector", "offset", "--target", "right_wall",
+            "--order", "2", match="projector pose 'coaxial' then, 'offset' now")
