@@ -261,7 +261,7 @@ def each_order(observations, target, covariance, *, unreached_light: bool = True
 
     def orders() -> Iterator[Decomposition]:
         for n in range(2, k + 1):
-            leading = cov[[packed_index(i, j, k) for i in range(n) for j in range(i, n)]]
+            leading = cov if n == k else cov[[packed_index(i, j, k) for i in range(n) for j in range(i, n)]]
             yield decompose(obs[:n], target, constraint="none", unreached_light=unreached_light, covariance=leading)
 
     return orders()
@@ -321,16 +321,16 @@ def prepare_trust(decompositions, photograph, *, radii=RADII, window: int = WIND
         for i, d in enumerate(decompositions):
             _check_decomposition(i, d)
         decompositions = sorted(decompositions, key=lambda d: d.order)
-    first = None
+    first = None  # (shape, target, unreached light) of the first decomposition: not the arrays, dropped after use
     levels: list[TrustLevel] = []
     total = len(decompositions) if isinstance(decompositions, list) else None
     for i, d in enumerate(decompositions):
         _check_decomposition(i, d)
-        first = d if first is None else first
-        if d.shape != photo.shape or not np.array_equal(d.target, first.target):
+        first = (d.target.copy(), d.unreached_light) if first is None else first
+        if d.shape != photo.shape or not np.array_equal(d.target, first[0]):
             raise InputError(f"decompositions[{i}] must share the photograph's shape {photo.shape} and the first "
                              "decomposition's target")
-        if d.unreached_light != first.unreached_light:
+        if d.unreached_light != first[1]:
             raise InputError("the decompositions must agree on unreached light")
         if d.order < 2:
             continue
@@ -344,12 +344,12 @@ def prepare_trust(decompositions, photograph, *, radii=RADII, window: int = WIND
         if len(levels) == 1:
             assert d.covariance is not None  # _check_decomposition
             photo_var = _photograph_variance(d.covariance)
-            target, unreached_light = d.target.copy(), d.unreached_light
-    if not levels:
+        del d  # the next order's arrays replace this one's
+    if not levels or first is None:
         return TrustedDecomposition(photo, np.zeros_like(photo), (), np.zeros(photo.shape[:2], bool))
     if total is not None:
         report(progress, total, total, "interaction shares smoothed")
-    return TrustedDecomposition(photo, photo_var, tuple(levels), target, unreached_light)
+    return TrustedDecomposition(photo, photo_var, tuple(levels), first[0], first[1])
 
 
 def _check_decomposition(i: int, d) -> None:
