@@ -108,7 +108,8 @@ def weighted_table(h, w):
 
     rng = np.random.default_rng(2)
     print(f"\nweighted decomposition on {h}x{w} RGB, 1 % noise, covariance diagonal per pixel-channel")
-    print(f"{'K':>2} | {'unweighted M/s':>14} {'GLS M/s':>8} | {'GLS / unweighted':>16} "
+    print(f"{'K':>2} | {'unweighted M/s':>14} {'GLS M/s':>8} | {'GLS time ratio':>16} "
+          f"| {'unconstrained: unweighted M/s':>29} {'GLS M/s':>8} {'time ratio':>10} {'I/O ratio':>9} "
           f"| {'noise-aware prep s':>18} {'recolor s':>9}")
     small, target = synthetic_stack(3, 8, 8, noise=0.01, rng=rng)
     decompose(small, target, covariance=np.full((6,) + small.shape[1:], 1e-4, np.float32))  # compile once
@@ -126,12 +127,23 @@ def weighted_table(h, w):
         decompose(obs, target, covariance=cov)
         gls = rate(time.perf_counter() - t0, obs[0].size)
         t0 = time.perf_counter()
+        decompose(obs, target, constraint="none")
+        plain_none = rate(time.perf_counter() - t0, obs[0].size)
+        t0 = time.perf_counter()
+        decompose(obs, target, constraint="none", covariance=cov)
+        gls_none = rate(time.perf_counter() - t0, obs[0].size)
+        # bytes each solve must read and write per pixel-channel: K observations in, K components
+        # out; GLS adds K(K+1)/2 covariance planes in and as many out (the floor of its time ratio
+        # where memory bandwidth bounds both)
+        io = (2 * order + order * (order + 1)) / (2 * order)
+        t0 = time.perf_counter()
         trusted = prepare_trust(decompose_orders(obs, target, cov), obs[0])
         prep = time.perf_counter() - t0
         t0 = time.perf_counter()
         recolor_trusted(trusted, (2.0, 0.125, 8.0))
         rec = time.perf_counter() - t0
-        print(f"{order:>2} | {plain:>14.2f} {gls:>8.2f} | {gls / plain:>15.2f}x | {prep:>18.1f} {rec:>9.2f}")
+        print(f"{order:>2} | {plain:>14.2f} {gls:>8.2f} | {plain / gls:>15.1f}x | {plain_none:>29.2f} {gls_none:>8.2f} "
+              f"{plain_none / gls_none:>9.1f}x {io:>8.1f}x | {prep:>18.1f} {rec:>9.2f}")
 
 
 def full(megapixels):

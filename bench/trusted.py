@@ -1,8 +1,9 @@
 """Noise-aware recolor speed: what the app's preview and export pay for it, beside the plain recolor.
 
 An order-K acquisition of a synthetic target (geometric interreflections, every observation
-with its camera-noise variance) is made once: :func:`engine.trust.decompose_orders` and
-:func:`engine.trust.prepare_trust` (the one-off preparation, per acquisition), then per κ
+with its camera-noise variance) is made once: :func:`engine.trust.each_order` and
+:func:`engine.trust.prepare_trust` (the one-off preparation, per acquisition; its time and peak
+memory beside the same with every order's decomposition held at once), then per κ
 :func:`engine.trust.recolor_trusted` at full resolution against the plain recolor of the
 same acquisition (:func:`engine.recolor.recolor`, export) and its screen-sized preview
 (:func:`engine.recolor.recolor_preview`, a slider event).
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import time
+import tracemalloc
 
 import numpy as np
 
@@ -21,7 +23,7 @@ from engine.decompose import decompose
 from engine.figurate import transport_matrix
 from engine.noise import pack_covariance
 from engine.recolor import prepare_preview, recolor, recolor_preview
-from engine.trust import decompose_orders, prepare_trust, recolor_trusted
+from engine.trust import decompose_orders, each_order, prepare_trust, recolor_trusted
 
 KAPPA = (2.0, 0.125, 8.0)
 
@@ -53,6 +55,17 @@ def timed(fn, repeats: int) -> tuple[float, object]:
     return best, out
 
 
+def measured(fn) -> tuple[float, object, int]:
+    """Seconds, result and peak bytes allocated (tracemalloc) of one call."""
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    out = fn()
+    seconds = time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return seconds, out, peak
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--size", type=int, nargs=2, default=(512, 512), metavar=("H", "W"))
@@ -63,7 +76,11 @@ def main() -> None:
     args = parser.parse_args()
     h, w = args.size
     obs, target, cov = acquisition(h, w, args.order)
-    t_prep, trusted = timed(lambda: prepare_trust(decompose_orders(obs, target, cov), obs[0]), 1)
+    rows = slice(h // 4, h // 4 + 16)  # target and surroundings: compile the kernel before timing
+    decompose(obs[:2, rows], target[rows], constraint="none", covariance=cov[:3, rows])
+    t_prep, trusted, peak = measured(lambda: prepare_trust(each_order(obs, target, cov), obs[0]))
+    t_list, _, peak_list = measured(lambda: prepare_trust(decompose_orders(obs, target, cov), obs[0]))
+    held = obs.nbytes + cov.nbytes
     plain = decompose(obs, target, covariance=cov)
     t_first, _ = timed(lambda: recolor_trusted(trusted, KAPPA), 1)  # gathers each region's pixels once
     t_trusted, _ = timed(lambda: recolor_trusted(trusted, KAPPA), args.repeats)
@@ -73,7 +90,10 @@ def main() -> None:
     t_preview, _ = timed(lambda: recolor_preview(pack, KAPPA), max(args.repeats, 5))
     mp = h * w / 1e6
     print(f"{h}x{w} ({mp:.2f} MP), order {args.order}, kappa {KAPPA}")
-    print(f"prepare (once per acquisition: decompose_orders + prepare_trust): {t_prep * 1e3:9.1f} ms")
+    print(f"prepare (once per acquisition: each_order + prepare_trust):       {t_prep * 1e3:9.1f} ms  "
+          f"peak {peak / 2**30:.2f} GiB = {peak / held:.1f}x the observations and covariance ({held / 2**30:.2f} GiB)")
+    print(f"  every order held at once (decompose_orders list):              {t_list * 1e3:9.1f} ms  "
+          f"peak {peak_list / 2**30:.2f} GiB = {peak_list / held:.1f}x; one at a time: {peak_list / peak:.2f}x less")
     print(f"recolor_trusted, first kappa (gathers the regions once):        {t_first * 1e3:9.1f} ms")
     print(f"recolor_trusted (per kappa, full resolution):                   {t_trusted * 1e3:9.1f} ms")
     print(f"plain recolor (per kappa, full resolution):                     {t_plain * 1e3:9.1f} ms  "

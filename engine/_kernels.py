@@ -357,14 +357,17 @@ def _lstsq_free(g, h, free, d, rinv, q, y, v, rr):  # pragma: no cover - compile
 def _settle(g, h, d, s, free, rinv, q, y, v, rr):  # pragma: no cover - compiled
     """The inner loop of Lawson–Hanson: solve on the passive (free) set; while that solution
     leaves it, step from ``d`` toward it as far as stays feasible and drop the variables that
-    reach zero. Ends with ``d`` the feasible solution on the final free set (0 elsewhere)."""
+    reach zero. Ends with ``d`` the feasible solution on the final free set (0 elsewhere).
+
+    Returns True when ``s`` and ``rinv`` hold the least-squares solve of that final free set
+    (so :func:`_nnls` need not factor it again)."""
     n = g.shape[1]
     for _inner in range(3 * n + 3):
         anyfree = False
         for k in range(n):
             anyfree = anyfree or free[k]
         if not anyfree:
-            return
+            return False
         _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
         ok = True
         for k in range(n):
@@ -373,7 +376,7 @@ def _settle(g, h, d, s, free, rinv, q, y, v, rr):  # pragma: no cover - compiled
         if ok:
             for k in range(n):
                 d[k] = s[k]
-            return
+            return True
         alpha = 1.0
         for k in range(n):
             if free[k] and s[k] <= 0:
@@ -385,6 +388,7 @@ def _settle(g, h, d, s, free, rinv, q, y, v, rr):  # pragma: no cover - compiled
             if free[k] and d[k] <= 0:
                 free[k] = False
                 d[k] = 0.0
+    return False
 
 
 @njit(cache=True)
@@ -399,7 +403,7 @@ def _nnls(g, h, d, s, w, free, rinv, q, y, v, rr, tol):  # pragma: no cover - co
         free[k] = d[k] > 0.0
         if not free[k]:
             d[k] = 0.0
-    _settle(g, h, d, s, free, rinv, q, y, v, rr)  # the starting passive set first
+    current = _settle(g, h, d, s, free, rinv, q, y, v, rr)  # the starting passive set first
     scale = 0.0
     for r in range(m):
         scale += h[r] * h[r]
@@ -426,8 +430,10 @@ def _nnls(g, h, d, s, w, free, rinv, q, y, v, rr, tol):  # pragma: no cover - co
         if arg < 0:
             break
         free[arg] = True
-        _settle(g, h, d, s, free, rinv, q, y, v, rr)
-    # R⁻¹ of the final free set (the covariance's factor), d on it
-    _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
+        current = _settle(g, h, d, s, free, rinv, q, y, v, rr)
+    # R⁻¹ of the final free set (the covariance's factor), d on it: already there when the last
+    # settle ended on a solve of that set (most columns: one factorisation instead of two)
+    if not current:
+        _lstsq_free(g, h, free, s, rinv, q, y, v, rr)
     for k in range(n):
         d[k] = s[k] if free[k] and s[k] > 0 else 0.0

@@ -45,6 +45,7 @@ from engine.workflow import (
     edit_from_plan,
     estimated_report,
     noise_reduced,
+    rig_metadata,
     run_calibration,
     run_capture,
     save_edit,
@@ -134,7 +135,7 @@ def run(args) -> int:
         else:
             session = Session.create(
                 session_path, rig_name=rig.identity, camera_resolution=tuple(rig.camera.resolution),
-                projector_resolution=tuple(rig.projector.resolution), metadata={"demo": True},
+                projector_resolution=tuple(rig.projector.resolution), metadata=rig_metadata(rig, demo=True),
             )
         kind = ("ideal" if args.ideal else "realistic") + (" path-traced" if path_traced else "")
         print(f"calibrating {rig.name} ({kind}, {args.projector}) ...", file=sys.stderr)

@@ -84,11 +84,15 @@ def demo_resolution(canvas: tuple[int, int]) -> tuple[int, int]:
 def demo_key(rig_name: str, rig, options: dict) -> str:
     """Names one demo set-up: scene content, camera model, resolution, pose, seed, the demo's plan."""
     from devices.virtual.setup import MODEL_VERSION
+    from engine.workflow import rig_metadata
 
     blob = json.dumps({"rig": rig_name, "scene": getattr(getattr(rig, "scene", None), "digest", ""),
                        "model": MODEL_VERSION, "options": {k: options[k] for k in sorted(options)},
                        "camera": list(rig.camera.resolution), "projector": list(rig.projector.resolution),
-                       "target": DEMO_TARGET, "order": DEMO_ORDER}, sort_keys=True, default=str)
+                       "target": DEMO_TARGET, "order": DEMO_ORDER,
+                       # what its session records about the rig (a session made before it recorded the projector's
+                       # bit depth is replayed as 8-bit's: built again)
+                       "session": rig_metadata(rig)}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -110,6 +114,7 @@ def _prune(folder: Path, keep: Path) -> None:
 def _session(folder: Path, rig_name: str, rig, options: dict):
     """The demo's session for this rig: reused (resumed, when a start was killed) or new."""
     from engine.session import Session
+    from engine.workflow import rig_metadata
 
     path = folder / f"demo-{rig_name.partition(':')[2]}-{demo_key(rig_name, rig, options)}"
     if (path / "manifest.json").exists():
@@ -123,7 +128,7 @@ def _session(folder: Path, rig_name: str, rig, options: dict):
     elif path.exists():
         shutil.rmtree(path, ignore_errors=True)
     return Session.create(path, rig_name=rig.identity, camera_resolution=rig.camera.resolution,
-                          projector_resolution=rig.projector.resolution, metadata={"demo": True})
+                          projector_resolution=rig.projector.resolution, metadata=rig_metadata(rig, demo=True))
 
 
 def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, progress=None, should_stop=None,

@@ -29,6 +29,7 @@ from engine.workflow.calibration import (
     load_calibration,
     load_compatible_calibration,
     open_session_for_rig,
+    rig_metadata,
     run_calibration,
     save_calibration,
 )
@@ -70,6 +71,7 @@ __all__ = [
     "calibration_problems", "capture_plan", "check_frames", "check_rig", "check_targets", "decomposition_key",
     "denoised_key", "edit_from_plan", "estimated_report", "load_calibration", "load_compatible_calibration",
     "load_decomposition", "load_trusted", "noise_reduced", "open_session_for_rig", "photograph_name", "preflight",
-    "run_calibration", "run_capture", "run_checker", "save_calibration", "save_edit", "saved_checker", "saved_edit",
+    "rig_metadata", "run_calibration", "run_capture", "run_checker", "save_calibration", "save_edit", "saved_checker",
+    "saved_edit",
     "store_directs", "target_albedo", "target_colour", "target_direct", "trusted_key",
 ]

@@ -14,10 +14,27 @@ from engine.session.colour import COLOUR_GROUP
 
 __all__ = [
     "adopt_calibration", "calibration_problems", "check_rig", "load_calibration", "load_compatible_calibration",
-    "open_session_for_rig", "run_calibration", "save_calibration",
+    "open_session_for_rig", "rig_metadata", "run_calibration", "save_calibration",
 ]
 
 _CALIBRATION_GROUP = "rig"
+
+
+def rig_metadata(rig, **extra) -> dict:
+    """The facts about ``rig`` a session must record for its captures to be replayed offline.
+
+    The projector's input bit depth decides how much rounding noise a re-emitted pattern
+    carries (:func:`engine.noise.quantization_variance`); a session without it is replayed as
+    an 8-bit projector's, so the noise-aware recolor of an ideal (float) projector's captures
+    would smooth away detail that is not noise.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace
+    >>> rig_metadata(SimpleNamespace(projector=SimpleNamespace(bit_depth=24)), demo=True)
+    {'projector_bit_depth': 24, 'demo': True}
+    """
+    return {"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8)), **extra}
 
 
 def open_session_for_rig(path, rig) -> Session:
@@ -50,7 +67,7 @@ def open_session_for_rig(path, rig) -> Session:
         rig_name=rig.identity,
         camera_resolution=tuple(rig.camera.resolution),
         projector_resolution=tuple(rig.projector.resolution),
-        metadata={"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8))},
+        metadata=rig_metadata(rig),
         fingerprint=fingerprint_of(rig),
     )
 

@@ -34,6 +34,8 @@ def test_demo_acquires_the_right_wall_like_fig6(demo):
     assert doc.acquisition.cascade == (wall.uid,) and not doc.is_dirty()
     assert doc.unreachable is not None and doc.unreachable.shape == doc.shape
     doc.check_acquirable([wall.uid])  # the app agrees with the engine, which acquired every pixel
+    # replayed offline (the noise-aware recolor), the captures carry the ideal projector's rounding, not 8 bits'
+    assert session.metadata["projector_bit_depth"] == rig.projector.bit_depth == 24
     truth = rig.truth.recolor([(wall.mask, np.array(DEMO_KAPPA))])
     est = recolor(doc.decomposition, DEMO_KAPPA)
     assert np.linalg.norm(est - truth) / np.linalg.norm(truth) < 0.01
