@@ -33,11 +33,12 @@ again, recolored noise-aware from each acquisition's observation covariance, ave
 of pixels whose true error lies within ±2 predicted σ; Fig. 6 also with the wall painted as
 a soft mask (the hard mask refined from a captured photograph, the app's Refine Edge): on
 this rig's 4×4-supersampled pixels a hard mask's mixed edge pixels alone cost 8.8 % without
-any noise (``bench/bound.py``); and the ideal Cornell box at
-κ_B = 8 for captured orders 2…8 (one order-8 acquisition: its first k observations are an
-order-k acquisition).
+any noise (``bench/bound.py``); Fig. 10 also with all three targets refined that way; and the
+ideal Cornell box at κ_B = 8 for captured orders 2…8 (one order-8 acquisition: its first k
+observations are an order-k acquisition).
 
 Run: .venv/bin/python bench/paper.py [--resolution 128] [--frames 16] [--seeds 3] [--out bench/paper_results.md]
+     [--only-noise-aware [--noise-aware-figures 6 8 10]]
 """
 
 from __future__ import annotations
@@ -563,11 +564,12 @@ class NoiseAwareRow:
         return err, sig
 
 
-def noise_aware(seeds, resolution, frames) -> tuple[list[NoiseAwareRow], float, list]:
+def noise_aware(seeds, resolution, frames, figures=("6", "8", "10")) -> tuple[list[NoiseAwareRow], float | None, list]:
     """The realistic co-axial Figs. 6, 8, 10, noise-aware, over ``seeds``; the ideal order sweep.
 
-    Returns the rows, the share of pixels within ±2σ pooled over the Fig. 6 and Fig. 8 runs,
-    and ``[(order, plain, trusted)]`` for the ideal Cornell box at κ = (2, 0.125, 8).
+    Returns the rows, the share of pixels within ±2σ pooled over the Fig. 6 and Fig. 8 runs
+    (None when neither ran), and ``[(order, plain, trusted)]`` for the ideal Cornell box at
+    κ = (2, 0.125, 8) (with Fig. 6 only). ``figures`` chooses among ``"6"``, ``"8"``, ``"10"``.
     """
     rows: dict[str, NoiseAwareRow] = {}
 
@@ -576,38 +578,18 @@ def noise_aware(seeds, resolution, frames) -> tuple[list[NoiseAwareRow], float, 
 
     pooled_err, pooled_sig = [], []
     for seed in seeds:
-        with Bench("cornell", ideal=False, resolution=resolution, frames=frames, seed=seed) as b:
-            truth, keep = b.truth([("right_wall", KAPPA_FIG6)]), ~b.lamp
-            for k, edge in ((4, "hard"), (2, "hard"), (4, "refine")):
-                case = f"1 target, order {k}" + (", soft mask (Refine Edge)" if edge == "refine" else "")
-                e, s_ = row("6", case).add(b.acquire(["right_wall"], k, edge=edge), KAPPA_FIG6, truth, keep,
-                                           [(b.mask("right_wall"), KAPPA_FIG6)])
-                pooled_err.append(e)
-                pooled_sig.append(s_)
-        with Bench("wedge", ideal=False, resolution=resolution, frames=frames, seed=seed) as b:
-            pairs = [("left", KAPPA_LEFT), ("right", KAPPA_RIGHT)]
-            truth, keep = b.truth(pairs), ~b.lamp
-            photo = b.capture_photograph()  # under the flood: observations[0] has the projector's black removed
-            for case, adaptive in (("brute force", None),
-                                   ("adaptive span 1 %, noise band", Adaptive("span", 0.01)),
-                                   ("adaptive linear 1 %, noise band", Adaptive("linear", 0.01)),
-                                   ("adaptive span 1 %, threshold only", Adaptive("span", 0.01, noise_band=False))):
-                res = b.acquire(["left", "right"], 4, fixed_kappa=[KAPPA_LEFT], adaptive=adaptive)
-                e, s_ = row("8", f"2 targets, order 4, {case}").add(res, KAPPA_RIGHT, truth, keep,
-                                                                   [(b.mask(n), k) for n, k in pairs], photo)
-                pooled_err.append(e)
-                pooled_sig.append(s_)
-        with Bench("three", ideal=False, resolution=resolution, frames=frames, seed=seed) as b:
-            names = ["red", "blue", "beige"]
-            truth, keep = b.truth(list(zip(names, KAPPA_THREE, strict=True))), ~b.lamp
-            pairs = [(b.mask(n), k) for n, k in zip(names, KAPPA_THREE, strict=True)]
-            photo = b.capture_photograph()
-            # hard masks: a soft edge is refused on any target but the last of a cascade (check_soft_edges)
-            res = b.acquire(names, 4, fixed_kappa=list(KAPPA_THREE[:2]))
-            row("10", "3 targets, order 4, brute force").add(res, KAPPA_THREE[2], truth, keep, pairs, photo)
+        if "6" in figures:
+            _fig6_aware(row, seed, resolution, frames, pooled_err, pooled_sig)
+        if "8" in figures:
+            _fig8_aware(row, seed, resolution, frames, pooled_err, pooled_sig)
+        if "10" in figures:
+            _fig10_aware(row, seed, resolution, frames)
         print(f"noise-aware rows: seed {seed} done", flush=True)
-    within = float(np.mean(np.concatenate(pooled_err) <= 2 * np.concatenate(pooled_sig)))
+    within = (float(np.mean(np.concatenate(pooled_err) <= 2 * np.concatenate(pooled_sig))) if pooled_err
+              else None)
     sweep = []
+    if "6" not in figures:
+        return list(rows.values()), within, sweep
     with Bench("cornell", ideal=True, resolution=resolution) as b:
         truth, keep = b.truth([("right_wall", KAPPA_FIG6)]), ~b.lamp
         acq = b.acquire(["right_wall"], MAX_ORDER).acquisition
@@ -618,6 +600,48 @@ def noise_aware(seeds, resolution, frames) -> tuple[list[NoiseAwareRow], float, 
             trusted = relative_error(recolor_trusted(acq.target.trust(obs, cov), KAPPA_FIG6).image, truth, keep)
             sweep.append((k, plain, trusted))
     return list(rows.values()), within, sweep
+
+
+def _fig6_aware(row, seed, resolution, frames, pooled_err, pooled_sig) -> None:
+    """Fig. 6 on the realistic Cornell box: orders 4 and 2 with the hard mask, order 4 refined."""
+    with Bench("cornell", ideal=False, resolution=resolution, frames=frames, seed=seed) as b:
+        truth, keep = b.truth([("right_wall", KAPPA_FIG6)]), ~b.lamp
+        for k, edge in ((4, "hard"), (2, "hard"), (4, "refine")):
+            case = f"1 target, order {k}" + (", soft mask (Refine Edge)" if edge == "refine" else "")
+            e, s_ = row("6", case).add(b.acquire(["right_wall"], k, edge=edge), KAPPA_FIG6, truth, keep,
+                                       [(b.mask("right_wall"), KAPPA_FIG6)])
+            pooled_err.append(e)
+            pooled_sig.append(s_)
+
+
+def _fig8_aware(row, seed, resolution, frames, pooled_err, pooled_sig) -> None:
+    """Fig. 8 on the realistic wedge: brute force and the adaptive policies."""
+    with Bench("wedge", ideal=False, resolution=resolution, frames=frames, seed=seed) as b:
+        pairs = [("left", KAPPA_LEFT), ("right", KAPPA_RIGHT)]
+        truth, keep = b.truth(pairs), ~b.lamp
+        photo = b.capture_photograph()  # under the flood: observations[0] has the projector's black removed
+        for case, adaptive in (("brute force", None),
+                               ("adaptive span 1 %, noise band", Adaptive("span", 0.01)),
+                               ("adaptive linear 1 %, noise band", Adaptive("linear", 0.01)),
+                               ("adaptive span 1 %, threshold only", Adaptive("span", 0.01, noise_band=False))):
+            res = b.acquire(["left", "right"], 4, fixed_kappa=[KAPPA_LEFT], adaptive=adaptive)
+            e, s_ = row("8", f"2 targets, order 4, {case}").add(res, KAPPA_RIGHT, truth, keep,
+                                                               [(b.mask(n), k) for n, k in pairs], photo)
+            pooled_err.append(e)
+            pooled_sig.append(s_)
+
+
+def _fig10_aware(row, seed, resolution, frames) -> None:
+    """Fig. 10 on the realistic three-area scene: hard masks, then all three targets refined."""
+    with Bench("three", ideal=False, resolution=resolution, frames=frames, seed=seed) as b:
+        names = ["red", "blue", "beige"]
+        truth, keep = b.truth(list(zip(names, KAPPA_THREE, strict=True))), ~b.lamp
+        pairs = [(b.mask(n), k) for n, k in zip(names, KAPPA_THREE, strict=True)]
+        photo = b.capture_photograph()
+        for edge in ("hard", "refine"):
+            case = "3 targets, order 4, brute force" + (", soft masks (Refine Edge)" if edge == "refine" else "")
+            res = b.acquire(names, 4, fixed_kappa=list(KAPPA_THREE[:2]), edge=edge)
+            row("10", case).add(res, KAPPA_THREE[2], truth, keep, pairs, photo)
 
 
 def _spread(values, fmt) -> str:
@@ -691,6 +715,8 @@ def main(argv=None) -> None:
     ap.add_argument("--no-offset", action="store_true", help="skip the offset-projector rows")
     ap.add_argument("--seeds", type=int, default=3, help="camera-noise seeds averaged in the noise-aware rows")
     ap.add_argument("--only-noise-aware", action="store_true", help="only the noise-aware rows (issue 15)")
+    ap.add_argument("--noise-aware-figures", nargs="+", choices=["6", "8", "10"], default=["6", "8", "10"],
+                    help="which figures' noise-aware rows to run (the ideal order sweep and ±2σ need 6 or 8)")
     args = ap.parse_args(argv)
     res = (args.resolution, args.resolution)
     start = time.perf_counter()
@@ -726,13 +752,25 @@ def main(argv=None) -> None:
 
     t = time.perf_counter()
     seeds = list(range(1, args.seeds + 1))
-    aware, within, sweep = noise_aware(seeds, res, args.frames)
+    aware, within, sweep = noise_aware(seeds, res, args.frames, tuple(args.noise_aware_figures))
     timings.append((f"noise-aware rows ({len(seeds)} seeds) and the ideal order sweep", time.perf_counter() - t, 0))
     print()
     print(noise_aware_table(aware))
-    print(f"pooled over the Fig. 6 and Fig. 8 runs: {100 * within:.1f} % of pixels within ±2σ")
+    pooled = [] if within is None else [f"Pooled over the Fig. 6 and Fig. 8 runs: **{100 * within:.1f} %** of "
+                                        "pixels within ±2σ.", ""]
+    print("\n".join(pooled))
     for k, plain, trusted in sweep:
         print(f"ideal order {k}: plain {_pct(plain)} noise-aware {_pct(trusted)}")
+    ideal_sweep = [
+        "Ideal Cornell box, κ = (2, 0.125, 8), one order-8 acquisition decomposed from its first k observations "
+        "(lamp pixels excluded):",
+        "",
+        "| captured order | " + " | ".join(str(k) for k, _, _ in sweep) + " |",
+        "|---|" + "---|" * len(sweep),
+        "| plain | " + " | ".join(_pct(p) for _, p, _ in sweep) + " |",
+        "| noise-aware | " + " | ".join(f"{100 * t:.4f} %" for _, _, t in sweep) + " |",
+        "",
+    ] if sweep else []
     aware_text = [
         "## Noise-aware recolor (issue 15)",
         "",
@@ -746,16 +784,8 @@ def main(argv=None) -> None:
         "",
         noise_aware_table(aware),
         "",
-        f"Pooled over the Fig. 6 and Fig. 8 runs: **{100 * within:.1f} %** of pixels within ±2σ.",
-        "",
-        "Ideal Cornell box, κ = (2, 0.125, 8), one order-8 acquisition decomposed from its first k observations "
-        "(lamp pixels excluded):",
-        "",
-        "| captured order | " + " | ".join(str(k) for k, _, _ in sweep) + " |",
-        "|---|" + "---|" * len(sweep),
-        "| plain | " + " | ".join(_pct(p) for _, p, _ in sweep) + " |",
-        "| noise-aware | " + " | ".join(f"{100 * t:.4f} %" for _, _, t in sweep) + " |",
-        "",
+        *pooled,
+        *ideal_sweep,
     ]
     if args.only_noise_aware:
         total = time.perf_counter() - start

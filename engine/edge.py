@@ -270,12 +270,21 @@ def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Dec
     s_out /= np.maximum(s_out.sum(axis=0), 1e-30)
     i_in = box(np.where(inside[:, :, None], light, 0))[vy, vx] / n_in[vy, vx, None]
     i_out = box(np.where(around[:, :, None], light, 0))[vy, vx] / n_around[vy, vx, None]
-    alpha = cov[rows, cols][vy, vx][:, None]
-    num = alpha * i_in
-    wgt = num / np.maximum(num + (1 - alpha) * i_out, 1e-30)
+    alpha = np.broadcast_to(cov[rows, cols][vy, vx][:, None], i_in.shape)
+    # the two sides' light is non-negative; where neither has any, the coverage alone decides
+    num = alpha * np.maximum(i_in, 0)
+    den = num + (1 - alpha) * np.maximum(i_out, 0)
+    wgt = np.divide(num, den, out=alpha.astype(np.float64), where=den > 0)
     pixel = light[vy, vx]
     own = np.concatenate([unreached[None, vy, vx], comps[: k - 1, vy, vx]]).astype(np.float64)
-    own *= (pixel / np.maximum(own.sum(axis=0), 1e-30))[None]
+    # F sums to I: rescaled where both are light, else the difference goes to the unreached light.
+    # (A pixel lit only by re-emitted differences or noise may hold no light or negative light:
+    # under a cascade's emission on a later target an earlier target's edge is mostly dark;
+    # a floored division there once turned F into ~1e22 and its shares swamped the image.)
+    total = own.sum(axis=0)
+    fits = (total > 0) & (pixel > 0)
+    own *= np.where(fits, pixel / np.where(fits, total, 1.0), 1.0)[None]
+    own[0] += np.where(fits, 0.0, pixel - total)
     target_part = np.maximum(own - (1 - wgt)[None] * pixel[None] * s_out, 0)
     other = own - target_part
     packed = np.zeros((k, len(vy), c))

@@ -27,7 +27,6 @@ from engine.acquire.steps import Acquisition, CaptureSettings, EmittedNoise, ree
 from engine.acquire.target import PreparedTarget, pattern_budget, prepare_target
 from engine.calibrate import Calibration
 from engine.checks import check_kappa, check_order
-from engine.edge import is_soft
 from engine.errors import InputError
 from engine.figurate import MAX_ORDER
 from engine.progress import report
@@ -279,29 +278,6 @@ def capture_stem(target: str, mask) -> str:
 _DEFAULT_SETTINGS = CaptureSettings()
 
 
-def check_soft_edges(targets) -> None:
-    """Refuse a soft mask on any target of a cascade but the last.
-
-    Parameters
-    ----------
-    targets : sequence of (str, (H, W) bool or float coverage)
-        In cascade order.
-
-    Raises
-    ------
-    InputError
-        An earlier target (acquired with its fixed κ) has a soft edge. Its edge pixels cannot
-        be re-emitted, and the fixed-κ re-emissions of a soft-edged target diverge: measured
-        on the realistic three-target scene (128², Fig. 10), 96 % error with the first two
-        targets refined against 4.3 % with hard masks, where refining the last alone gives 4.3 %.
-    """
-    for name, mask in list(targets)[:-1]:
-        if is_soft(mask):
-            raise InputError(f"target {name!r} has a soft edge but is not the last of the cascade: only the last "
-                             "target may be soft (Refine Edge or a feathered brush); make it hard again (undo its "
-                             "Refine Edge) or acquire it last")
-
-
 def acquire_cascade(
     recorder: Recorder,
     calibration: Calibration,
@@ -321,8 +297,9 @@ def acquire_cascade(
     ----------
     recorder : Recorder
     calibration : Calibration
-    targets : sequence of (name, (H, W) bool)
-        In cascade order; the last one's κ stays free.
+    targets : sequence of (name, (H, W) bool or float coverage)
+        In cascade order; the last one's κ stays free. Any of them may be a soft mask
+        (:mod:`engine.edge`): its solid pixels are re-emitted, its edge pixels blended.
     order : int or "auto"
         K, the decomposition order of every target. ``"auto"`` (one target only) captures until
         the linear prediction (Eq. 10–11) of the newest capture is within the adaptive
@@ -377,7 +354,6 @@ def acquire_cascade(
     if (total > 1 + 1e-6).any():
         raise InputError("targets overlap: a pixel may belong to one target only "
                          "(soft masks: coverages may not sum past 1)")
-    check_soft_edges(targets)
     rig = recorder.rig
     identity = getattr(rig, "identity", getattr(rig, "name", calibration.rig_name))
     calibration.check_compatible(identity, tuple(rig.camera.resolution), tuple(rig.projector.resolution))

@@ -8,7 +8,7 @@ from enum import StrEnum
 import numpy as np
 
 from engine.acquire import Adaptive, CaptureSettings, Recorder, acquire_cascade
-from engine.acquire.cascade import CascadeResult, check_soft_edges
+from engine.acquire.cascade import CascadeResult
 from engine.calibrate import Calibration, fill_correspondence
 from engine.checks import check_kappa, check_mask
 from engine.decompose import Decomposition
@@ -105,8 +105,7 @@ def check_targets(targets, shape: tuple[int, int], *, unreachable: np.ndarray | 
     InputError
         No target, a name a user could not have typed or used twice, a mask of another shape,
         an empty target (a soft one: no pixel wholly on it), overlapping targets (soft ones:
-        coverages summing past 1), a soft target before the last
-        (:func:`engine.acquire.cascade.check_soft_edges`), or unreachable pixels.
+        coverages summing past 1), or unreachable pixels.
     """
     if not targets:
         raise InputError("no target to acquire: add a target and paint it first")
@@ -132,7 +131,6 @@ def check_targets(targets, shape: tuple[int, int], *, unreachable: np.ndarray | 
     if (total > 1 + 1e-6).any():
         raise InputError("targets overlap: a pixel may belong to one target only (soft masks: coverages may not "
                          "sum past 1)")
-    check_soft_edges(targets)
     if unreachable is not None:
         conflicts = {n: int(np.count_nonzero(solid_part(m) & unreachable)) for n, m in targets}
         listed = ", ".join(f"{n!r}: {c} px" for n, c in conflicts.items() if c)

@@ -108,6 +108,30 @@ def test_blend_edges_recolors_each_side_with_its_own_shares():
     assert np.abs(recolor(d, kappa)[changed] - expected[changed]).max() > 0.1
 
 
+def test_blend_edges_keeps_dark_and_negative_edge_pixels_bounded():
+    """An earlier cascade target is decomposed under emissions on a later one: its edge pixels
+    are then lit only by interreflections, and camera noise or a re-emitted difference leaves
+    some with no light or negative light. Blending must keep them as small as their light and
+    still give the photograph at κ = 1 (a floored division once made such a pixel ~1e26 times
+    its light, and its shares then swamped every smoothing window around it)."""
+    d, alpha, photo, *_ = _decomposition()
+    col = edge(alpha)
+    scale = np.ones(alpha.shape, np.float32)
+    scale[col] = np.resize([-0.01, 0.0, 1e-9, 0.5], int(col.sum()))  # negative, dark, all but dark, lit
+    dark_photo = (photo * scale[:, :, None]).astype(np.float32)
+    neg = d.components * scale[None, :, :, None], d.unreached * scale[:, :, None]
+    d = Decomposition(neg[0].astype(np.float32), neg[1].astype(np.float32), d.target)
+    dark_photo[:, 5] *= -1e-3  # the neighbour beside the edge: noise around zero
+    blended, changed = blend_edges(d, alpha, dark_photo)
+    assert changed[col].all()
+    for kappa in (1.0, np.array([2.0, 6.0, 0.5])):
+        got = recolor(blended, kappa)
+        assert np.isfinite(got).all()
+        bound = float(np.max(kappa)) ** 3 * (np.abs(dark_photo) + np.abs(d.unreached)).sum(axis=-1)[col] * 3
+        assert (np.abs(got[col]).max(axis=-1) <= bound + 1e-12).all()
+    np.testing.assert_allclose(recolor(blended, 1.0)[col], dark_photo[col], rtol=1e-5, atol=1e-9)
+
+
 def test_blend_edges_leaves_hard_masks_and_lonely_edges_alone():
     d, alpha, photo, *_ = _decomposition()
     same, changed = blend_edges(d, alpha >= 0.5, photo)
