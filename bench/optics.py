@@ -9,7 +9,8 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
   noise reduction, and the whole image against the render's own noise floor (two
   independent truth renders). "soft" refines the hard mask from the photograph
   (:func:`engine.edge.refine_mask`); "soft (true coverage)" uses the rig's exact coverage.
-* ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4).
+* ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4), the true
+  coverage also without the edge's stand-in (:func:`engine.edge.stand_in`, the previous behaviour).
 * ``realistic`` — the realistic demo's rig (``albedit demo --realistic``: virtual Cornell box
   128², 4×4 supersampled pixels, projector at half the camera's resolution, camera noise, 16
   frames a capture), κ = (2, 0.125, 8), noise reduction sized from the measured noise as the
@@ -179,10 +180,12 @@ def part_virtual(args):
     exp = Experiment(rig, "right_wall", 4)
     exp.acquire("hard", exp.hard)
     exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
+    exp.acquire("true-previous", exp.coverage, CaptureSettings(stand_in=False))
     exp.acquire("true", exp.coverage)
     edge_table(
         exp,
-        [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"), ("soft mask, true coverage", "true")],
+        [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"),
+         ("soft, true coverage, no stand-in", "true-previous"), ("soft mask, true coverage", "true")],
         [K1, K2],
         denoise_for=lambda k: 0,
         lamp=rig.truth.emitters(),
@@ -201,6 +204,7 @@ def part_realistic(args):
     exp.acquire("hard", exp.hard)
     exp.acquire("soft-previous", refine_mask(exp.hard, exp.photograph()), CaptureSettings(complete_direct=False))
     exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
+    exp.acquire("true-previous", exp.coverage, CaptureSettings(stand_in=False))
     exp.acquire("true", exp.coverage)
     truth = exp.truth(K2)
     photo = exp.photograph()
@@ -210,7 +214,9 @@ def part_realistic(args):
     rows = [("naive per-pixel", np.where(exp.hard[:, :, None], photo * K2.astype(np.float32), photo), 0)]
     for label, name in [("previous (hard mask)", "hard-previous"), ("hard mask + direct completion", "hard"),
                         ("soft refined, no completion", "soft-previous"),
-                        ("soft refined + direct completion", "soft"), ("soft true coverage + completion", "true")]:
+                        ("soft refined + direct completion", "soft"),
+                        ("soft true coverage, no stand-in", "true-previous"),
+                        ("soft true coverage + completion", "true")]:
         acq = exp._acq[name]
         d = acq.target.decompose(acq.observations)
         size = denoise_radius(d)[0]
