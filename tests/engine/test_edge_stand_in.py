@@ -56,3 +56,14 @@ def test_settings_store_the_stand_in_only_when_it_is_off():
     on, off = CaptureSettings(), CaptureSettings(stand_in=False)
     assert "stand_in" not in on.to_dict()  # plans stored before it existed stay equal
     assert CaptureSettings.from_dict(off.to_dict()) == off and CaptureSettings.from_dict(on.to_dict()) == on
+
+
+def test_the_truth_splits_each_pixels_interactions_into_the_targets_part_and_the_rest(tmp_path):
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(24, 24), supersample=4,
+                          cache_dir=tmp_path) as rig:
+        hard, cov = rig.targets["right_wall"], rig.coverage["right_wall"]
+        on, off = rig.truth.interactions_by_surface(hard, 3)
+        np.testing.assert_allclose(on + off, rig.truth.interactions(hard, 3), rtol=1e-5, atol=1e-7)
+    mixed = (cov > 0) & (cov < 1)
+    assert (on[:, cov <= 0] == 0).all() and (off[1:, cov >= 1] == 0).all()  # off[0] keeps a lamp
+    assert (on[1, mixed] > 0).all() and (off[1, mixed] > 0).all()  # an edge pixel has both parts
