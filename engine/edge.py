@@ -105,7 +105,9 @@ def stand_in(coverage, emitted, *, radius: int = 2) -> np.ndarray:
     ``b(s) = Σ_q c_q |s − q|⁻² / Σ_{s'} |s' − q|⁻²``. The
     extra direct light this puts on s is known (``b I``) and taken out of the capture
     (:meth:`engine.acquire.emission.Emitter.shortfall`); what stays is the strip's
-    interreflections, displaced by a pixel or two.
+    interreflections, displaced by a pixel or two. The emitter cuts the raised light at the
+    pattern's peak rather than dimming the whole pattern for it (which costs signal against
+    the camera noise).
 
     Examples
     --------

@@ -91,7 +91,11 @@ class Emitter:
         ``b ≥ 0`` per target pixel (:func:`engine.edge.stand_in`): emit ``(1 + b)`` times the
         light there, so that the pixels next to a target's edge also send the interreflections
         of the edge's target part, which cannot be re-emitted. The extra direct light ``b I``
-        is always taken out again through :attr:`Emission.shortfall`.
+        is always taken out again through :attr:`Emission.shortfall`. The pattern's scale
+        ``τ / max`` is that of the light without it, and the raised light is cut at τ: dimming
+        the whole pattern to make room for it cost more against the camera noise than it gained
+        (realistic Cornell box at 64², κ = (2, 0.125, 8): 7.42 % error over the surfaces that
+        way, 5.75 % cut, 6.88 % without the stand-in).
     """
 
     correspondence: Correspondence
@@ -140,18 +144,22 @@ class Emitter:
             for channels, label in groups:
                 plane = np.zeros_like(part)
                 plane[..., channels] = part[..., channels]
-                shown = plane if boost is None else (plane * boost).astype(np.float32)
-                peak = float(shown.max())
+                peak = float(plane.max())
                 if peak <= 0:
                     continue
+                # the stand-in raises the light next to the edge but not the scale (a lower scale
+                # would dim the whole pattern against the camera noise): where it would pass τ
+                # it is cut, and the shortfall accounts for the direct light actually given
                 scale = self.tau / peak
-                proj = self._warp(shown * scale)
+                proj = self._warp(plane * scale if boost is None else plane * boost * scale)
                 proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
                 short = None
                 if self.complete_direct:
                     short = self._direct(plane * scale, channels) - self._direct(self._lit(proj), channels)
                 elif boost is not None:  # the stand-in's extra direct light only
-                    short = self._direct(plane * scale, channels) - self._direct(shown * scale, channels)
+                    raised = (boost > 1) & t
+                    short = np.where(raised, self._direct(plane * scale, channels)
+                                     - self._direct(self._lit(proj), channels), 0).astype(np.float32)
                 if self.response is not None:
                     proj = self.response.linearize(proj)
                 out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix, short))
