@@ -3,7 +3,7 @@ discard the demo's acquisition → feather the right wall's edge with a soft bru
 shows the feather: the overlay's opacity follows the coverage) → Refine Edge (shown the same
 way) → undo → redo → acquire → recolor: the seam along the wall's edge shrinks (the error on its edge
 pixels against the rig's truth falls well below the binary mask's and the naive recolor's).
-Not yet reached at this size: the edge pixels' error is still about 5× the interior's (the issue
+Not yet reached at this size: the edge pixels' error is still about 8× the interior's (the issue
 asks for a wall-with-edge error within 1.5× the interior's).
 
 Driven through the real window only (tests/app/qt/user.py); the demo's rig is made small (40²)
