@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
+
+#: The rig a command opens when neither ``--rig`` nor the session names one.
+DEFAULT_RIG = "virtual:cornell"
 
 
 def kappa(text: str) -> np.ndarray:
@@ -78,27 +82,56 @@ def resolution(text: str) -> tuple[int, int]:
     return parts[0], parts[1]
 
 
+def output_image(text: str) -> Path:
+    """Parse ``-o PATH``: an image format Albedit exports, in a folder that exists (checked before any work)."""
+    from app.model.files import EXPORT_FORMATS
+
+    path = Path(text)
+    if path.suffix.lower() not in EXPORT_FORMATS:
+        raise argparse.ArgumentTypeError(f"output must end in one of {sorted(EXPORT_FORMATS)}, got {text!r}")
+    if not path.parent.is_dir():
+        raise argparse.ArgumentTypeError(f"no folder {str(path.parent)!r} to write {path.name!r} into")
+    return path
+
+
 def add_rig_options(parser) -> None:
     """``--rig NAME`` and the virtual rig's options."""
-    parser.add_argument("--rig", default="virtual:cornell",
-                        help="rig to open (see `albedit devices`); default %(default)s")
+    parser.add_argument("--rig", default=None,
+                        help=f"rig to open (see `albedit devices`); default: the session's rig, else {DEFAULT_RIG}")
     parser.add_argument("--ideal", action="store_true", help="virtual rig: no noise, linear projector")
     parser.add_argument("--resolution", type=resolution, default=None, help="virtual rig camera resolution, N or HxW")
     parser.add_argument("--projector", choices=("coaxial", "offset"), default=None, help="virtual rig projector pose")
     parser.add_argument("--seed", type=int, default=None, help="virtual rig noise seed")
 
 
-def open_rig(args):
-    """Open the rig named by ``--rig`` with the virtual options that were given."""
-    import devices
+def open_rig(args, recorded=None):
+    """Open the rig named by ``--rig`` with the virtual options that were given.
 
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's arguments (:func:`add_rig_options`).
+    recorded : engine.session.Session, optional
+        The calibrated session the rig is opened for: without ``--rig`` its rig is opened, and
+        a virtual rig's set-up options not given on the command line (resolutions, ideal,
+        projector pose, supersampling, ...) are the ones it was calibrated with.
+    """
+    import devices
+    from devices.virtual import recorded_options
+
+    name = args.rig or (recorded.rig_name if recorded is not None else DEFAULT_RIG)
     options = {}
-    if args.rig.startswith("virtual:"):
+    if name.startswith("virtual:"):
+        if recorded is not None and recorded.rig_name == name:
+            options = recorded_options(recorded.fingerprint, recorded.camera_resolution,
+                                       recorded.projector_resolution)
+            if args.resolution is not None:
+                options.pop("projector_resolution")  # a new camera resolution brings its own projector's
         for key in ("ideal", "resolution", "projector", "seed"):
             value = getattr(args, key, None)
             if value not in (None, False):
                 options[key] = value
-    return devices.open_rig(args.rig, **options)
+    return devices.open_rig(name, **options)
 
 
 def report_session(session, command: str) -> None:

@@ -7,6 +7,8 @@ from pathlib import Path
 
 from app.cli._args import add_rig_options, levels, open_rig, report_session
 from app.cli.main import ProgressBar
+from engine.session import Session
+from engine.session.paths import MANIFEST
 from engine.workflow import calibration_problems, open_session_for_rig, run_calibration
 
 
@@ -21,7 +23,8 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    with open_rig(args) as rig:
+    resumed = Session.open(args.session) if (args.session / MANIFEST).exists() else None
+    with open_rig(args, resumed) as rig:
         session = open_session_for_rig(args.session, rig)
         report_session(session, "calibrate")
         cal = run_calibration(rig, session, levels=args.levels, crosstalk=args.crosstalk, progress=ProgressBar())

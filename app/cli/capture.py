@@ -70,7 +70,8 @@ def _targets(args, rig) -> list[tuple[str, np.ndarray]]:
 
 
 def run(args) -> int:
-    with open_rig(args) as rig:
+    recorded = Session.open(args.session if args.calibration is None else args.calibration)
+    with open_rig(args, recorded) as rig:
         targets = _targets(args, rig)
         check_targets(targets, tuple(rig.camera.resolution))  # before any folder is made or capture taken
         if args.calibration is not None:
@@ -78,7 +79,7 @@ def run(args) -> int:
             session = open_session_for_rig(args.session, rig)
             adopt_calibration(session, calibration)
         else:
-            session = Session.open(args.session)
+            session = recorded
             session.recover_orphans()
         report_session(session, "capture")
         flood = None

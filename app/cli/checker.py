@@ -43,7 +43,7 @@ def run(args) -> int:
     session = Session.open(args.session)
     session.recover_orphans()
     report_session(session, "checker")
-    with open_rig(args) as rig:
+    with open_rig(args, session) as rig:
         record = run_checker(rig, session, corners=args.corners, frames=args.frames, progress=ProgressBar())
     placed = " ".join(f"{x:.1f},{y:.1f}" for x, y in record.checker.corners)
     print(record.report(), file=sys.stderr)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from app.cli._args import output_image
 from app.cli.recolor import (
     add_denoise_option,
     add_recolor_option,
@@ -18,7 +19,7 @@ from engine.errors import SessionError
 
 def add_arguments(parser) -> None:
     parser.add_argument("session", type=Path, help="a captured session folder with a saved edit")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="output image (.exr, .tif, .png)")
+    parser.add_argument("-o", "--output", type=output_image, required=True, help="output image (.exr, .tif, .png)")
     parser.add_argument("--half", action="store_true", help="EXR: write half floats")
     add_denoise_option(parser)
     add_recolor_option(parser)

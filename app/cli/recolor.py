@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import kappa, radius
+from app.cli._args import kappa, output_image, radius
 from app.model.document import Document
 from app.model.files import export_image, open_document, prepare_trusted, save_document
 from engine.colour import convergence, parse_colour, to_hex
@@ -44,7 +44,7 @@ def add_arguments(parser) -> None:
                         help="with --colour or --match: change hue and chroma only, keep the target's luminance")
     parser.add_argument("--exposure", type=float, default=0.0, metavar="STOPS",
                         help="the display exposure a --colour is meant at (default 0: '#ffffff' is linear 1)")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="output image (.exr, .tif, .png)")
+    parser.add_argument("-o", "--output", type=output_image, required=True, help="output image (.exr, .tif, .png)")
     parser.add_argument("--half", action="store_true", help="EXR: write half floats")
     add_denoise_option(parser)
     add_recolor_option(parser)

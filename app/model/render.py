@@ -247,7 +247,7 @@ class ViewRenderer:
 
     def trusted_recolor(self, kappa) -> TrustedRecolor:
         """:func:`engine.trust.recolor_trusted` at full resolution (the last κ's is cached)."""
-        key = tuple(float(k) for k in np.broadcast_to(np.asarray(kappa, float), (3,)))
+        key = _kappa_key(kappa)
         with self._trusted_lock:
             if self._trusted_cache is None or self._trusted_cache[0] != key:
                 self._trusted_cache = (key, recolor_trusted(self.trusted, key))
@@ -255,7 +255,7 @@ class ViewRenderer:
 
     def cached_trusted(self, kappa) -> TrustedRecolor | None:
         """The noise-aware recolor of ``kappa`` if it is computed already (read-outs never wait for it)."""
-        key = tuple(float(k) for k in np.broadcast_to(np.asarray(kappa, float), (3,)))
+        key = _kappa_key(kappa)
         cached = self._trusted_cache
         return cached[1] if cached is not None and cached[0] == key else None
 
@@ -381,3 +381,9 @@ class MaskSnapshot:
 
     def __hash__(self) -> int:
         return hash(self.version)
+
+
+def _kappa_key(kappa) -> tuple[float, float, float]:
+    """``kappa`` (scalar or per channel) as the hashable per-channel key of the noise-aware recolor cache."""
+    r, g, b = (float(k) for k in np.broadcast_to(np.asarray(kappa, float), (3,)))
+    return r, g, b

@@ -28,8 +28,8 @@ from devices.virtual.truth import Components, Truth
 from engine.checks import check_choice
 from engine.errors import InputError
 
-__all__ = ["open_rig", "probe", "VirtualRig", "Truth", "Components", "CameraModel", "ProjectorModel",
-           "default_cache_dir", "scene_names", "load_scene"]
+__all__ = ["open_rig", "recorded_options", "probe", "VirtualRig", "Truth", "Components", "CameraModel",
+           "ProjectorModel", "default_cache_dir", "scene_names", "load_scene"]
 
 _OPTIONS = ("ideal", "seed", "projector", "resolution", "projector_resolution", "ambient", "cache_dir",
             "patch_size", "supersample", "defocus", "progress")
@@ -174,6 +174,39 @@ def open_rig(arg: str, **options) -> VirtualRig:
                    "supersample": int(sub), "defocus": float(defocus)}
     return VirtualRig(name, camera, projector, targets=target_masks(scene, setup), truth=truth, renderer=renderer,
                       coverage=target_coverage(scene, setup), fingerprint=fingerprint)
+
+
+def recorded_options(fingerprint: dict | None, camera_resolution, projector_resolution) -> dict:
+    """The :func:`open_rig` options that open the set-up a calibration was made with.
+
+    Parameters
+    ----------
+    fingerprint : dict or None
+        The rig's fingerprint as a session recorded it (:attr:`VirtualRig.fingerprint`); None
+        (a session from before fingerprints) gives the resolutions only.
+    camera_resolution, projector_resolution : (H, W)
+        The session's camera and projector resolutions.
+
+    Returns
+    -------
+    dict
+        ``resolution``, ``projector_resolution`` and, when recorded, ``ideal``, ``projector``
+        (the pose), ``supersample``, ``defocus`` and ``patch_size``: what the fingerprint
+        compares, so the rig they open matches the calibration. The noise seed is not part of it.
+
+    Examples
+    --------
+    >>> recorded_options({"ideal": True, "projector pose": "offset"}, (32, 32), (16, 16))
+    {'resolution': (32, 32), 'projector_resolution': (16, 16), 'ideal': True, 'projector': 'offset'}
+    """
+    options: dict = {"resolution": tuple(int(v) for v in camera_resolution),
+                     "projector_resolution": tuple(int(v) for v in projector_resolution)}
+    names = {"ideal": "ideal", "projector pose": "projector", "supersample": "supersample",
+             "defocus": "defocus", "patch size": "patch_size"}
+    for recorded, option in names.items():
+        if fingerprint is not None and recorded in fingerprint:
+            options[option] = fingerprint[recorded]
+    return options
 
 
 def _on_target(pieces, quad, a, b) -> np.ndarray:

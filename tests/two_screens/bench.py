@@ -18,7 +18,7 @@ def add_rig_options(monkeypatch, cache) -> dict:
              "virtual": {"cache_dir": cache, "projector_resolution": PROJECTOR, "supersample": 1}}
     real = devices.open_rig
     def open_rig(name, **options):
-        return real(name, **options, **extra.get(name.partition(":")[0], {}))
+        return real(name, **{**options, **extra.get(name.partition(":")[0], {})})
 
     monkeypatch.setattr(devices, "open_rig", open_rig)
     return extra

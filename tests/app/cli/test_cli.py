@@ -10,6 +10,7 @@ import pytest
 from app.cli.main import COMMANDS
 from app.main import main
 from engine.imageio import read_image, read_metadata
+from engine.session import Session
 
 
 def _run(*args, cwd=None):
@@ -72,6 +73,8 @@ def test_demo_runs_on_the_path_traced_rig(tmp_path):
         (["recolor", "{tmp}/nowhere", "--kappa", "1", "-o", "{tmp}/x.exr"], "no session folder"),
         (["recolor", "{tmp}", "--kappa", "-1", "-o", "{tmp}/x.exr"], "non-negative"),
         (["capture", "{tmp}/nowhere", "--target", "right_wall"], "no session folder"),
+        (["recolor", "{tmp}", "--kappa", "2", "-o", "{tmp}/x.bmp"], "output must end in one of"),
+        (["export", "{tmp}", "-o", "{tmp}/nowhere/x.exr"], "no folder"),
         (["calibrate", "{tmp}/s", "--rig", "nosuch:0"], "unknown rig backend"),
         (["demo", "-o", "{tmp}/d", "--target", "ceiling", "--resolution", "16"], "has no target"),
         (["demo", "-o", "{tmp}/d", "--rig", "opencv:0"], "must be a rig with ground truth"),
@@ -96,6 +99,20 @@ def test_a_calibration_is_reused_across_sessions_of_the_same_rig_only(tmp_path):
     assert other.returncode == 1
     assert "calibration was made for camera 24×24" in other.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "s3").exists()
+
+
+def test_capture_opens_the_rig_the_session_was_calibrated_with(tmp_path):
+    """Without rig options, capture and a reused calibration open the calibrated set-up (not the 256² default)."""
+    assert _run("calibrate", str(tmp_path / "cal"), "--ideal", "--resolution", "24", "--projector", "offset",
+                "--levels", "3").returncode == 0
+    for session, extra in ((tmp_path / "cal", []), (tmp_path / "s2", ["--calibration", str(tmp_path / "cal")])):
+        result = _run("capture", str(session), *extra, "--target", "right_wall", "--order", "1")
+        assert result.returncode == 0, result.stderr
+        assert "captured 1 images" in result.stderr
+        assert Session.open(session).camera_resolution == (24, 24)
+    changed = _run("capture", str(tmp_path / "cal"), "--resolution", "32", "--target", "right_wall", "--order", "1")
+    assert changed.returncode == 1
+    assert "calibration was made for camera 24×24" in changed.stderr.strip().splitlines()[-1]
 
 
 def test_an_edit_saved_by_the_app_exports_from_the_command_line(acquired_doc, tmp_path):

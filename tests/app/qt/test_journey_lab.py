@@ -1,6 +1,7 @@
 """J2, the lab tech: with a document open, Rig ▸ Calibrate → auto exposure → identify → calibrate →
 Finish → Rig ▸ Acquire on a target painted in that document → progress, pause, resume, cancel,
-resume → recolor. Then the same after File ▸ Open of another session.
+resume → recolor → Save → Export (noise-aware, against the truth). Then the same after File ▸ Open of
+another session, and File ▸ Open of the first again: its edit exports the same pixels.
 
 Threaded, as in the app (jobs and the live view on workers), on the ideal virtual rig at 32²;
 the user pauses and cancels when a capture's thumbnail arrives, so nothing depends on timing.
@@ -141,6 +142,13 @@ def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monk
     # the noise-aware recolor is prepared after the acquisition (a job in the status bar): wait for it to end
     qtbot.waitUntil(lambda: window.job is None and doc.trusted is not None, timeout=TIMEOUT_MS)
 
+    # File ▸ Save into the calibrated session, File ▸ Export: the noise-aware recolor, true to the scene
+    first = window.session.path
+    user.trigger("save")
+    qtbot.waitUntil(lambda: window.job is None and not doc.is_dirty(), timeout=TIMEOUT_MS)
+    exported = _export(user, window, qtbot, monkeypatch, tmp_path / "first.exr")
+    assert relative_error(exported, truth, surfaces) < 0.01
+
     # the same after File ▸ Open of another session: the open rig stays, calibrate again, acquire
     other = Document(photo, source="another photograph")
     t = other.add_target("left wall", left & binary_erosion(left, iterations=1))
@@ -162,4 +170,23 @@ def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monk
     with devices.open_rig("virtual:cornell", ideal=True, resolution=(RES, RES)) as check:
         truth = check.truth.recolor([(second.by_name("left wall").mask, np.array([0.5, 1.0, 2.0]))])
     assert relative_error(recolor(second.decomposition, second.recolor_kappa()), truth, surfaces) < 0.01
+
+    # File ▸ Open the first session again (the second edit is discarded): its edit and recolor come back whole
+    monkeypatch.setattr(QFileDialog, "getExistingDirectory", staticmethod(lambda *a, **k: str(first)))
+    dialogs.answers = [QMessageBox.StandardButton.Discard]
+    user.trigger("open")
+    qtbot.waitUntil(lambda: window.doc is not second and window.job is None, timeout=TIMEOUT_MS)
+    reopened = window.doc
+    assert reopened.acquisition is not None and reopened.acquisition.noise_aware
+    np.testing.assert_allclose(reopened.by_name(target.name).kappa, kappa)
+    np.testing.assert_array_equal(_export(user, window, qtbot, monkeypatch, tmp_path / "again.exr"), exported)
     assert dialogs.texts("critical") == []
+
+
+def _export(user: User, window, qtbot, monkeypatch, path) -> np.ndarray:
+    """File ▸ Export to ``path`` (a linear EXR, noise-aware): the pixels written."""
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(path), "")))
+    user.trigger("export")
+    qtbot.waitUntil(lambda: window.job is None and path.exists(), timeout=TIMEOUT_MS)
+    assert imageio.read_metadata(path)["edit"]["recolor"] == "noise-aware"
+    return imageio.read_image(path)
