@@ -12,6 +12,8 @@ target or as non-target leaves a seam along every edge. Here the target is a *so
   part — measured by the re-emissions around it, one interaction late — and the neighbour's,
   recolored with the interaction shares of nearby outside pixels (as :mod:`engine.fill` does
   for unreachable pixels): :func:`blend_edges`;
+* the emitted pixels next to the edge also emit the edge's target part (:func:`stand_in`), so
+  that the observations hold about the interreflections of the whole target Eq. 6 assumes;
 * a soft mask comes from the rig's true coverage, or from the artist's hard mask refined along the
   photograph's edges (:func:`refine_mask`: the compositing equation ``I = α A + (1 − α) B``
   solved per pixel with the two sides' colours extrapolated from nearby pixels).

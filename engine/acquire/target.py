@@ -104,7 +104,8 @@ class PreparedTarget:
         stood in for: they are where the correspondence is unreliable (concave corners, where
         interreflections corrupt the Gray code), and raising the light next to them amplifies
         whatever the projector pixels there really light (measured on the 40² supersampled
-        Cornell box: a column of them made the observations 15–20 % wrong on the wall beside it).
+        Cornell box, before shared decodes were refilled, :func:`_drop_shared`: a column of
+        them made the observations 15–20 % wrong on the wall beside it).
         """
         if self.coverage is None:
             return None
