@@ -9,7 +9,10 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
   noise reduction, and the whole image against the render's own noise floor (two
   independent truth renders). "soft" refines the hard mask from the photograph
   (:func:`engine.edge.refine_mask`); "soft (true coverage)" uses the rig's exact coverage.
-* ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4).
+* ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4), the true
+  coverage also without the edge's stand-in (:func:`engine.edge.stand_in`, the previous behaviour).
+* ``edge`` — what the edge still costs on that box (48²): oracles that re-emit the edge strip
+  exactly or take the edge pixels' neighbour part from the truth.
 * ``realistic`` — the realistic demo's rig (``albedit demo --realistic``: virtual Cornell box
   128², 4×4 supersampled pixels, projector at half the camera's resolution, camera noise, 16
   frames a capture), κ = (2, 0.125, 8), noise reduction sized from the measured noise as the
@@ -179,10 +182,12 @@ def part_virtual(args):
     exp = Experiment(rig, "right_wall", 4)
     exp.acquire("hard", exp.hard)
     exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
+    exp.acquire("true-previous", exp.coverage, CaptureSettings(stand_in=False))
     exp.acquire("true", exp.coverage)
     edge_table(
         exp,
-        [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"), ("soft mask, true coverage", "true")],
+        [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"),
+         ("soft, true coverage, no stand-in", "true-previous"), ("soft mask, true coverage", "true")],
         [K1, K2],
         denoise_for=lambda k: 0,
         lamp=rig.truth.emitters(),
@@ -201,6 +206,7 @@ def part_realistic(args):
     exp.acquire("hard", exp.hard)
     exp.acquire("soft-previous", refine_mask(exp.hard, exp.photograph()), CaptureSettings(complete_direct=False))
     exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
+    exp.acquire("true-previous", exp.coverage, CaptureSettings(stand_in=False))
     exp.acquire("true", exp.coverage)
     truth = exp.truth(K2)
     photo = exp.photograph()
@@ -210,7 +216,9 @@ def part_realistic(args):
     rows = [("naive per-pixel", np.where(exp.hard[:, :, None], photo * K2.astype(np.float32), photo), 0)]
     for label, name in [("previous (hard mask)", "hard-previous"), ("hard mask + direct completion", "hard"),
                         ("soft refined, no completion", "soft-previous"),
-                        ("soft refined + direct completion", "soft"), ("soft true coverage + completion", "true")]:
+                        ("soft refined + direct completion", "soft"),
+                        ("soft true coverage, no stand-in", "true-previous"),
+                        ("soft true coverage + completion", "true")]:
         acq = exp._acq[name]
         d = acq.target.decompose(acq.observations)
         size = denoise_radius(d)[0]
@@ -221,6 +229,75 @@ def part_realistic(args):
         print(f"{label:<34} {100 * relative_error(img, truth, surfaces):7.2f}% {100 * e_wall:8.2f}% "
               f"{100 * e_in:8.2f}% {e_wall / max(e_in, 1e-12):6.2f} "
               f"{100 * relative_error(img, truth, wall & ~interior):7.2f}% {size:7d}", flush=True)
+    rig.close()
+
+
+def part_edge(args):
+    """What the edge still costs: oracles on the ideal supersampled box (true coverage).
+
+    Observations: re-emitted without / with the edge's stand-in, and the whole target's (the
+    edge strip re-emitted exactly, its own direct term left out, from the truth's interactions:
+    what Eq. 6 and the blend assume). Edge pixels: blended as shipped, with the neighbour's part
+    taken from the truth (the target's part is the rest of the pixel's decomposition, as in
+    :func:`engine.edge.blend_edges`), or wholly from the truth.
+    """
+    from math import comb
+
+    from engine.decompose import decompose
+    from engine.fill import fill_unreachable
+
+    res, order, terms_n = (32 if args.quick else 48), 4, 12
+    print(f"\n== the edge's cost, virtual:cornell {res}², supersampled 4×4, ideal, order {order}, true coverage; "
+          "wall + edge / interior error ==")
+    rig = devices.open_rig("virtual:cornell", ideal=True, resolution=(res, res), supersample=4)
+    exp = Experiment(rig, "right_wall", order)
+    cov, hard = exp.coverage, exp.hard
+    wall, interior, edge = cov > 0, interior_of(cov), (cov > 0) & (cov < 1)
+    on, off = rig.truth.interactions_by_surface(hard, terms_n, ambient=exp.ambient, pattern=exp.flood)
+    total = on + off
+    acq = {"no stand-in": exp.acquire("no-stand-in", cov, CaptureSettings(stand_in=False)),
+           "with the stand-in": exp.acquire("stand-in", cov)}
+    target = acq["with the stand-in"].target
+    whole = np.array(acq["no stand-in"].observations)
+    for r in range(1, order):
+        whole[r] = sum(comb(n - 1 + r, r) * total[n] for n in range(1, terms_n + 1))
+        whole[r] -= np.where(edge[:, :, None], sum(comb(n - 2 + r, r - 1) * on[n] for n in range(1, terms_n + 1)), 0)
+    observations = {name: a.observations for name, a in acq.items()} | {"whole target's": whole}
+    ys, xs = np.nonzero(edge)
+
+    def true_neighbour(obs, kappa):
+        d = decompose(obs, target.mask)
+        d = fill_unreachable(d, target.mask | target.unreachable, obs[0])[0]
+        out = recolor(d, kappa)
+        own = np.concatenate([d.unreached[None], d.components[:order - 1]])[:, ys, xs].astype(np.float64)
+        own *= (obs[0][ys, xs] / np.maximum(own.sum(0), 1e-30))[None]
+        neighbour = off[:order, ys, xs].astype(np.float64)
+        neighbour[order - 1] += off[order:, ys, xs].sum(0)
+        part = np.maximum(own - neighbour, 0)
+        out[ys, xs] = part[0] * kappa + sum(part[m + 1] * kappa ** (m + 2) for m in range(order - 1)) + sum(
+            neighbour[j] * kappa**j for j in range(order))
+        return out
+
+    def true_edge(obs, kappa):
+        out = recolor(target.decompose(obs), kappa)
+        out[ys, xs] = sum(total[n, ys, xs] * kappa**n for n in range(terms_n + 1))
+        return out
+
+    print(f"{'observations':<18} {'κ':>12} {'blend as shipped':>20} {'neighbour from truth':>22} "
+          f"{'edge px from truth':>20}")
+    for kappa in (K1, K2):
+        truth = exp.truth(kappa)
+        for name, obs in observations.items():
+            cells = []
+            for img in (recolor(target.decompose(obs), kappa), true_neighbour(obs, kappa), true_edge(obs, kappa)):
+                e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
+                cells.append(f"{100 * e_wall:.3f} / {100 * e_in:.3f}%")
+            print(f"{name:<18} {','.join(f'{x:g}' for x in kappa):>12} {cells[0]:>20} {cells[1]:>22} {cells[2]:>20}",
+                  flush=True)
+    solid_next = target.mask & ~interior
+    print("observations 1..3 off the whole target's on the solid pixels beside the edge: " + "; ".join(
+        f"{name} " + " / ".join(f"{100 * relative_error(obs[r], whole[r], solid_next):.2f}%" for r in range(1, order))
+        for name, obs in observations.items() if name != "whole target's"))
     rig.close()
 
 
@@ -431,6 +508,7 @@ PARTS = {
     "ratio": part_ratio,
     "cornell": part_cornell,
     "virtual": part_virtual,
+    "edge": part_edge,
     "realistic": part_realistic,
     "fig13": part_fig13,
     "fig3": part_fig3,

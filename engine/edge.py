@@ -12,6 +12,8 @@ target or as non-target leaves a seam along every edge. Here the target is a *so
   part — measured by the re-emissions around it, one interaction late — and the neighbour's,
   recolored with the interaction shares of nearby outside pixels (as :mod:`engine.fill` does
   for unreachable pixels): :func:`blend_edges`;
+* the emitted pixels next to the edge also emit the edge's target part (:func:`stand_in`), so
+  that the observations hold about the interreflections of the whole target Eq. 6 assumes;
 * a soft mask comes from the rig's true coverage, or from the artist's hard mask refined along the
   photograph's edges (:func:`refine_mask`: the compositing equation ``I = α A + (1 − α) B``
   solved per pixel with the two sides' colours extrapolated from nearby pixels).
@@ -71,6 +73,66 @@ def edge(coverage: np.ndarray) -> np.ndarray:
     """(H, W) bool: pixels partly on the target (0 < coverage < 1)."""
     c = np.asarray(coverage)
     return (c > 0) & (c < 1)
+
+
+def stand_in(coverage, emitted, *, radius: int = 2) -> np.ndarray:
+    """How much more each emitted pixel re-emits, to stand in for the target it borders that cannot be.
+
+    Parameters
+    ----------
+    coverage : (H, W) float in [0, 1]
+        The soft mask (a hard mask as 0/1): how much of each pixel is target.
+    emitted : (H, W) bool
+        The pixels the projector re-emits (solid, reachable).
+    radius : int
+        Target pixels not emitted hand their coverage to emitted pixels within this many
+        pixels (a square window); farther ones (a large shadow) are not stood in for.
+
+    Returns
+    -------
+    (H, W) float32
+        ``b ≥ 0`` on emitted pixels, 0 elsewhere: emitting ``(1 + b) I / D`` there instead of
+        ``I / D`` sends into the scene, from next to the edge, about the light the edge's target
+        part would have sent.
+
+    Notes
+    -----
+    Eq. 6 holds when the *whole* target re-emits its light; the target's part of an edge
+    pixel (and a painted pixel the projector cannot reach) re-emits nothing, so every
+    observation lacks the interreflections its light would have caused — most at the solid
+    pixels next to it, which makes their observations inconsistent with Eq. 6. A strip of
+    target next to an emitted pixel has about that pixel's radiance and form factors, so its
+    share ``c_q`` (coverage not emitted) of pixel q is given to the nearest emitted pixels s
+    (those of the first ring round q that has any) in proportion to ``1 / |s − q|²``:
+    ``b(s) = Σ_q c_q |s − q|⁻² / Σ_{s'} |s' − q|⁻²``. The
+    extra direct light this puts on s is known (``b I``) and taken out of the capture
+    (:meth:`engine.acquire.emission.Emitter.shortfall`); what stays is the strip's
+    interreflections, displaced by a pixel or two. The emitter cuts the raised light at the
+    pattern's peak rather than dimming the whole pattern for it (which costs signal against
+    the camera noise).
+
+    Examples
+    --------
+    >>> cov = np.array([[1, 1, 0.5, 0]], np.float32)
+    >>> stand_in(cov, cov >= 1).tolist()
+    [[0.0, 0.5, 0.0, 0.0]]
+    """
+    emitted = np.asarray(emitted, bool)
+    cov = check_coverage("coverage", coverage, emitted.shape)
+    if int(radius) < 1:
+        raise InputError(f"radius must be >= 1 pixel, got {radius!r}")
+    missing = np.where(emitted, 0.0, cov).astype(np.float32)
+    out = np.zeros(cov.shape, np.float32)
+    for r in range(1, int(radius) + 1):  # the nearest ring of emitted pixels takes it
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        dist2 = (yy * yy + xx * xx).astype(np.float32)
+        kernel = np.where(dist2 > 0, 1.0 / np.maximum(dist2, 1.0), 0.0).astype(np.float32)
+        norm = cv2.filter2D(emitted.astype(np.float32), -1, kernel, borderType=cv2.BORDER_CONSTANT)
+        given = norm > 1e-6
+        per_weight = np.where(given, missing / np.where(given, norm, 1.0), 0.0).astype(np.float32)
+        out += cv2.filter2D(per_weight, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+        missing = np.where(given, 0.0, missing).astype(np.float32)
+    return np.where(emitted, out, 0.0).astype(np.float32)
 
 
 def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, claimed=None) -> np.ndarray:

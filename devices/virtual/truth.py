@@ -210,6 +210,30 @@ class Truth:
             out[n] = self._r.to_image(terms[n], ambient=False)
         return out
 
+    def interactions_by_surface(self, mask: np.ndarray, n_terms: int, *, ambient: bool = True,
+                                pattern: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`interactions` split into the light of the target's surfaces and of the rest.
+
+        Returns
+        -------
+        on, off : (n_terms + 1, H, W, 3) float32
+            Per pixel, the part of ``L_n`` its sub-samples on the surfaces ``mask`` stands for
+            carry (divided by all its sub-samples: ``on + off`` is :meth:`interactions`), and
+            the rest's. On a mixed pixel of the target's edge, ``on`` is the target part of the
+            pixel and ``off`` the neighbour's; lights seen directly are in ``off[0]``.
+        """
+        mask = check_mask("mask", mask, self.shape)
+        n_terms = check_order(n_terms, name="n_terms", minimum=0)
+        e = self._light(ambient, pattern)
+        sel = self._pixels_to_samples(mask)
+        terms = interactions(self._r.setup, self._r.rho, sel, e, n_terms)
+        on = np.empty((n_terms + 1,) + self.shape + (3,), np.float32)
+        off = np.empty_like(on)
+        for n in range(n_terms + 1):
+            on[n] = self._r.to_image(terms[n] * sel[:, None], ambient=False)
+            off[n] = self._r.to_image(terms[n] * ~sel[:, None], ambient=bool(ambient) and n == 0)
+        return on, off
+
     def components(self, mask: np.ndarray, order: int, *, ambient: bool = True,
                    pattern: np.ndarray | None = None) -> Components:
         """The interaction components the paper's decomposition estimates.

@@ -106,6 +106,7 @@ class _Plan:
             Emitter(
                 p.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau,
                 settings.negative, p.direct_matrix, settings.complete_direct,
+                p.stand_in() if settings.stand_in else None,
             )
             for p in prepared
         ]

@@ -48,7 +48,8 @@ class Emission:
         Suffix naming the capture within its step (``"r"``, ``"g-neg"``, ``"rgb"``).
     shortfall : (H, W, 3) float32 or None
         Direct radiance the pattern was meant to put on the target's camera pixels minus
-        what it puts there (before ``scale`` is undone), see :meth:`Emitter.shortfall`.
+        what it puts there (before ``scale`` is undone), see :meth:`Emitter.shortfall`;
+        the stand-in's extra direct light (:attr:`Emitter.stand_in`) is part of it.
     """
 
     pattern: np.ndarray
@@ -86,6 +87,15 @@ class Emitter:
     complete_direct : bool
         Record each emission's :attr:`Emission.shortfall` (:meth:`shortfall`), so that the
         capture can be completed with the direct light the projector could not give.
+    stand_in : (H, W) float32, optional
+        ``b ≥ 0`` per target pixel (:func:`engine.edge.stand_in`): emit ``(1 + b)`` times the
+        light there, so that the pixels next to a target's edge also send the interreflections
+        of the edge's target part, which cannot be re-emitted. The extra direct light ``b I``
+        is always taken out again through :attr:`Emission.shortfall`. The pattern's scale
+        ``τ / max`` is that of the light without it, and the raised light is cut at τ: dimming
+        the whole pattern to make room for it cost more against the camera noise than it gained
+        (realistic Cornell box at 64², κ = (2, 0.125, 8): 7.42 % error over the surfaces that
+        way, 5.75 % cut, 6.88 % without the stand-in).
     """
 
     correspondence: Correspondence
@@ -97,6 +107,7 @@ class Emitter:
     negative: str = Negative.CLAMP
     direct_matrix: np.ndarray | None = None
     complete_direct: bool = True
+    stand_in: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 < float(self.tau) <= 1.0:
@@ -120,6 +131,7 @@ class Emitter:
         """
         t = self.target[:, :, None]
         light = self.light(wanted)  # linear projector light per primary, camera space
+        boost = None if self.stand_in is None else (1.0 + np.where(self.target, self.stand_in, 0))[:, :, None]
         clamped = int(np.count_nonzero((light < 0) & t))
         if self.negative == Negative.SPLIT:
             parts = [(np.maximum(light, 0), 1, ""), (np.maximum(-light, 0), -1, "-neg")]
@@ -135,12 +147,19 @@ class Emitter:
                 peak = float(plane.max())
                 if peak <= 0:
                     continue
+                # the stand-in raises the light next to the edge but not the scale (a lower scale
+                # would dim the whole pattern against the camera noise): where it would pass τ
+                # it is cut, and the shortfall accounts for the direct light actually given
                 scale = self.tau / peak
-                proj = self._warp(plane * scale)
+                proj = self._warp(plane * scale if boost is None else plane * boost * scale)
                 proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
                 short = None
                 if self.complete_direct:
                     short = self._direct(plane * scale, channels) - self._direct(self._lit(proj), channels)
+                elif boost is not None:  # the stand-in's extra direct light only
+                    raised = (boost > 1) & t
+                    short = np.where(raised, self._direct(plane * scale, channels)
+                                     - self._direct(self._lit(proj), channels), 0).astype(np.float32)
                 if self.response is not None:
                     proj = self.response.linearize(proj)
                 out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix, short))
@@ -176,7 +195,9 @@ class Emitter:
         adding the difference to the capture restores the direct term (up to the error of
         D). The interreflections the difference would have caused are not restored: it
         averages to zero over each projector pixel, so they are small. Clamped negative light
-        is not part of it (the rest of the scene did not receive it either).
+        is not part of it (the rest of the scene did not receive it either). Where the light
+        was raised to stand in for an edge (:attr:`Emitter.stand_in`) it is negative: the
+        extra direct light, ``b · wanted``, is known and taken out again.
 
         Returns
         -------

@@ -45,6 +45,11 @@ class CaptureSettings:
         meant to get and did not, because one projector pixel lights several of them with one
         value (:meth:`engine.acquire.emission.Emitter.shortfall`). False only to measure what
         it is worth (the behaviour before it existed).
+    stand_in : bool
+        Let the emitted pixels next to a target's edge (and next to painted pixels the
+        projector cannot reach) also emit the light of the target part there, which cannot be
+        re-emitted (:func:`engine.edge.stand_in`, :attr:`PreparedTarget.stand_in`). False only
+        to measure what it is worth (the behaviour before it existed).
     """
 
     per_channel: bool = True
@@ -52,18 +57,23 @@ class CaptureSettings:
     tau: float = 1.0
     negative: str = Negative.SPLIT
     complete_direct: bool = True
+    stand_in: bool = True
 
     def to_dict(self) -> dict:
-        """JSON form, stored in the session (``complete_direct`` only when off: older plans stay equal)."""
+        """JSON form, stored in the session (the switches that are on by default only when off)."""
         out = {"per_channel": self.per_channel, "differences": self.differences, "tau": self.tau,
                "negative": str(self.negative)}
-        return out if self.complete_direct else out | {"complete_direct": False}
+        for name in ("complete_direct", "stand_in"):
+            if not getattr(self, name):
+                out[name] = False
+        return out
 
     @classmethod
     def from_dict(cls, values: dict) -> CaptureSettings:
         """The settings :meth:`to_dict` stored."""
         return cls(per_channel=values["per_channel"], differences=values["differences"], tau=values["tau"],
-                   negative=values["negative"], complete_direct=values.get("complete_direct", True))
+                   negative=values["negative"], complete_direct=values.get("complete_direct", True),
+                   stand_in=values.get("stand_in", True))
 
     def captures_per_step(self) -> int:
         """Captures one re-emission costs."""
