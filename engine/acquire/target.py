@@ -291,7 +291,15 @@ def _drop_shared(corr: Correspondence, target: np.ndarray, margin: int) -> Corre
     solid pixel next to the corner was filled one projector pixel short, so its re-emission lit
     the pixel beside it). Dropped, it is filled from its neighbours like an undecoded pixel;
     :func:`_conflicts` still refuses it when the filled projector pixel is shared too.
+
+    Only when each projector pixel is at most one camera pixel: a coarser projector's pixels
+    straddle the target's edge and are shared by right decodes, which refilled from their
+    neighbours re-emit where the pixel does not look (realistic rig, 128² camera, 64²
+    projector, Fig. 10 with hard masks: 7.2 % dropped against 4.3 % kept).
     """
+    hp, wp = corr.projector_resolution
+    if hp < target.shape[0] or wp < target.shape[1]:
+        return corr
     shared = _conflicts(corr, target, margin=margin) & corr.valid
     if not shared.any():
         return corr

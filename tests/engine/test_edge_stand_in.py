@@ -68,3 +68,23 @@ def test_the_truth_splits_each_pixels_interactions_into_the_targets_part_and_the
     mixed = (cov > 0) & (cov < 1)
     assert (on[:, cov <= 0] == 0).all() and (off[1:, cov >= 1] == 0).all()  # off[0] keeps a lamp
     assert (on[1, mixed] > 0).all() and (off[1, mixed] > 0).all()  # an edge pixel has both parts
+
+
+def test_shared_decodes_are_refilled_only_where_a_projector_pixel_is_one_camera_pixel():
+    """At 1:1 a decode the neighbour shares is wrong and is refilled; under a coarser projector
+    sharing is how the target's edge looks (one projector pixel straddles it) and is kept."""
+    from engine.acquire.target import _drop_shared
+    from engine.calibrate import Correspondence
+    from engine.calibrate.graycode import PixelStatus
+
+    h, w = 4, 6
+    ys, xs = np.mgrid[0:h, 0:w]
+    status = np.full((h, w), PixelStatus.DECODED, np.uint8)
+    target = xs >= 3  # the right half; column 3 is its edge
+    coarse = Correspondence(xs // 2, ys, status, (h, w // 2))  # projector column 1 lights camera columns 2 and 3
+    np.testing.assert_array_equal(_drop_shared(coarse, target, 0).x, coarse.x)
+    fine_x = xs.copy()
+    fine_x[:, 3] = 2  # the edge column decoded onto the neighbour's projector column: wrong at 1:1
+    fine = Correspondence(fine_x, ys, status, (h, w))
+    dropped = _drop_shared(fine, target, 0)
+    assert (dropped.x[:, 3] == -1).all() and (dropped.x[:, 4:] == xs[:, 4:]).all()
