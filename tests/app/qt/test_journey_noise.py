@@ -14,20 +14,10 @@ from PySide6.QtWidgets import QLabel, QSlider
 from app.model.display import MAGNITUDE_MAP, false_colour, robust_max
 from app.qt.panels import kappa_to_ticks
 from engine.recolor import recolor_variance
-from tests.app.qt.user import User
-
-RES = (48, 48)
 
 
-def test_the_artist_sees_the_predicted_noise_of_the_edit(make_window, qtbot, monkeypatch):
-    import app.model.demo
-
-    real = app.model.demo.open_demo
-    monkeypatch.setattr(app.model.demo, "open_demo",
-                        lambda name, **kw: real(name, **dict(kw, resolution=RES, ideal=False)))
-    window = make_window()
-    user = User(qtbot, window)
-    user.trigger("demo")
+def test_the_artist_sees_the_predicted_noise_of_the_edit(realistic_demo):
+    window, user = realistic_demo
     doc = window.doc
     wall = doc.by_name("right_wall")
     d = doc.decomposition

@@ -21,8 +21,6 @@ from engine.trust import recolor_trusted
 from engine.workflow import load_trusted, saved_edit
 from tests.app.qt.user import User
 
-RES = (48, 48)
-
 
 def _shows(window, view: str, kappa) -> bool:
     frame = window.canvas.frame
@@ -30,15 +28,8 @@ def _shows(window, view: str, kappa) -> bool:
             and np.allclose(frame.request.kappa, kappa))
 
 
-def test_the_artist_edits_with_the_noise_aware_recolor_and_exports_it(make_window, qtbot, monkeypatch, tmp_path):
-    import app.model.demo
-
-    real = app.model.demo.open_demo
-    monkeypatch.setattr(app.model.demo, "open_demo",
-                        lambda name, **kw: real(name, **dict(kw, resolution=RES, ideal=False)))
-    window = make_window()
-    user = User(qtbot, window)
-    user.trigger("demo")
+def test_the_artist_edits_with_the_noise_aware_recolor_and_exports_it(realistic_demo, monkeypatch, tmp_path):
+    window, user = realistic_demo
     doc = window.doc
     wall = doc.by_name("right_wall")
     mode = user.find("recolor_mode", QLabel)
