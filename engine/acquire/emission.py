@@ -154,12 +154,10 @@ class Emitter:
                 proj = self._warp(plane * scale if boost is None else plane * boost * scale)
                 proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
                 short = None
-                if self.complete_direct:
+                if self.complete_direct or boost is not None:
                     short = self._direct(plane * scale, channels) - self._direct(self._lit(proj), channels)
-                elif boost is not None:  # the stand-in's extra direct light only
-                    raised = (boost > 1) & t
-                    short = np.where(raised, self._direct(plane * scale, channels)
-                                     - self._direct(self._lit(proj), channels), 0).astype(np.float32)
+                    if boost is not None and not self.complete_direct:  # the stand-in's extra direct light only
+                        short = np.where((boost > 1) & t, short, 0).astype(np.float32)
                 if self.response is not None:
                     proj = self.response.linearize(proj)
                 out.append(Emission(proj.astype(np.float32), channels, scale, sign, label + suffix, short))
