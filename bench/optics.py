@@ -485,7 +485,7 @@ def part_ratio(args):
     print(f"{'rig':<30} {'light':<16} {'R':>7} {'G':>7} {'B':>7} {'vs mitsuba (G)':>15} {'set-up':>8}")
     for light, ratio in mi_ratio.items():
         print(f"{'mitsuba, ' + str(spp) + ' spp':<30} {light:<16} " + " ".join(f"{x:7.4f}" for x in ratio))
-    for patch in [0.2, 0.1] if args.quick else [0.2, 0.1, 0.0834, 0.05]:
+    for patch in [0.2, 0.1] if args.quick else [0.2, 0.1, 0.0834]:
         t = time.perf_counter()
         v = devices.open_rig("virtual:cornell", ideal=True, resolution=(res, res), patch_size=patch, cache_dir=False)
         setup = time.perf_counter() - t

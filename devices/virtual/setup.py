@@ -8,11 +8,8 @@ the arrays every capture reuses:
   for each *mixed* pixel — one whose 8-neighbourhood changes surface, texture cell or
   projector shadow, so that its footprint may hold two of them (its centre sample is then
   inert and the pixel is the mean of its sub-samples, as a sensor averages its footprint);
-  then *hidden* samples: a regular grid on every quad, kept only where no unblocked camera
-  ray reaches the surface (the camera's samples stand for all it sees: a pixel's footprint
-  crosses a quad's edge as often as it stops short of it, so hidden samples kept where the
-  nearest pixel sees another quad would count that strip twice and dim the lit patches). Each
-  sample has a point, a quad, local coordinates and an area.
+  then *hidden* samples: a regular grid on every quad, kept only where the camera does not
+  see the surface. Each sample has a point, a quad, local coordinates and an area.
 * **patches** — each quad cut into a grid of cells about ``patch_size`` wide. The patch
   radiance is the area-weighted mean of its samples' radiance: ``B = Mavg L``.
 * **form factors** — ``Gn[m, j]``: from node ``m`` (a vertex of the patch grid) to patch
@@ -24,10 +21,11 @@ the arrays every capture reuses:
   polygon formula and ``light_samples**2`` shadow rays (soft shadows at pixel resolution).
 * **projector** — for every sample, the projector pixel nearest to its projection (each
   pixel sample is lit by exactly one projector pixel, so one-pixel stripes resolve), whether
-  it is lit (inside the frustum, facing the projector, and an unblocked shadow ray to the
-  projector's centre: a co-axial projector lights no hidden sample), and the geometric
-  irradiance factor ``cos(theta) / (d^2 cos^3(alpha))`` of a pinhole projector whose pixels
-  all emit the same flux.
+  it is lit (inside the frustum, facing the projector, and for camera pixels an unblocked
+  shadow ray to the projector's centre; for hidden samples, that pixel's own ray reaching the
+  same quad, so a co-axial projector never lights what the camera cannot see), and the
+  geometric irradiance factor ``cos(theta) / (d^2 cos^3(alpha))`` of a pinhole projector
+  whose pixels all emit the same flux.
 
 Arrays are stored as ``.npz`` (never pickle), keyed by a hash of the scene file's content,
 the options that change geometry and :data:`MODEL_VERSION`; a missing or corrupt cache file
@@ -54,7 +52,7 @@ from engine.errors import InputError
 from engine.imageio import atomic_write
 from engine.progress import report
 
-MODEL_VERSION = 10
+MODEL_VERSION = 9
 #: Most patches a scene may be cut into: their transport is dense in patches (memory ~ patches²).
 MAX_PATCHES = 8000
 
@@ -438,6 +436,7 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     # a mixed pixel's centre sample is inert: its sub-samples stand for it
     centre_quad = pixel_quad.copy()
     centre_quad[mixed] = -1
+    n_vis = h * w + len(s_quad)
 
     # --- hidden samples ------------------------------------------------------------------
     nu, nv, offset = patch_grid(scene, geometry.patch_size)
@@ -451,23 +450,13 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
         area_parts.append(np.full(a.size, quads.area[q] / (gu * gv)))
     hq, ha, hb, harea = map(np.concatenate, (q_parts, a_parts, b_parts, area_parts))
     hpoints = quads.point(hq, ha, hb)
-    hpatch = _patch_of(ha, hb, hq, nu, nv, offset)
-    # the camera's samples stand for all that it sees (a pixel's footprint crosses a quad's
-    # edge as often as it stops short of it), so a hidden sample is kept only where an
-    # unblocked camera ray does not reach it, unless its patch holds no camera sample
-    vis_q = np.concatenate([centre_quad, s_quad])
-    vis_a, vis_b = np.concatenate([pix_a, s_a]), np.concatenate([pix_b, s_b])
-    vis_live = vis_q >= 0
-    has_camera = np.zeros(int(offset[-1]), bool)
-    has_camera[_patch_of(vis_a[vis_live], vis_b[vis_live], vis_q[vis_live], nu, nv, offset)] = True
-    seen = _visible_from(camera, hpoints, hq, quads)
-    # a seen patch without camera samples takes the radiance of the pixels that see it when
-    # they see its quad (their samples lie just beside it), else its hidden samples stand for it
-    near = _seen_by(camera, pixel_quad, hpoints, hq, normal)
-    borrow = seen & ~has_camera[hpatch] & near
-    seen_pixel, _ = camera.nearest_pixel(hpoints[borrow])
-    seen_patch, seen_area = hpatch[borrow], harea[borrow]
-    keep = ~seen | (~has_camera[hpatch] & ~near)
+    seen = _seen_by(camera, pixel_quad, hpoints, hq, normal)
+    seen_pixel, _ = camera.nearest_pixel(hpoints[seen])
+    seen_patch = offset[hq[seen]] + (np.minimum((ha[seen] * nu[hq[seen]]).astype(np.int64), nu[hq[seen]] - 1)
+                                     * nv[hq[seen]] + np.minimum((hb[seen] * nv[hq[seen]]).astype(np.int64),
+                                                                 nv[hq[seen]] - 1))
+    seen_area = harea[seen]
+    keep = ~seen
     hq, ha, hb, harea, hpoints = hq[keep], ha[keep], hb[keep], harea[keep], hpoints[keep]
 
     quad = np.concatenate([centre_quad, s_quad, hq])
@@ -480,15 +469,21 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
     n_samples = len(quad)
 
     # --- patches, averaging and interpolation ---------------------------------------------
-    patch = np.where(live, _patch_of(a, b, qs, nu, nv, offset), -1)
+    pu = np.minimum((a * nu[qs]).astype(np.int64), nu[qs] - 1)
+    pv = np.minimum((b * nv[qs]).astype(np.int64), nv[qs] - 1)
+    patch = np.where(live, offset[qs] + pu * nv[qs] + pv, -1)
     n_patches = int(offset[-1])
     patch_quad = np.repeat(np.arange(len(quads)), nu * nv)
     patch_area = quads.area[patch_quad] / (nu * nv)[patch_quad]
     rows = np.flatnonzero(live)
     cols_patch, weights = patch[rows], area[rows]
-    rows = np.concatenate([rows, seen_pixel])
-    cols_patch = np.concatenate([cols_patch, seen_patch])
-    weights = np.concatenate([weights, seen_area])
+    # a patch seen by the camera but too thin to contain a pixel's sample takes the radiance
+    # of the pixels that see it (their samples lie on the same quad, just beside it)
+    empty = np.bincount(cols_patch, minlength=n_patches) == 0
+    extra = empty[seen_patch]
+    rows = np.concatenate([rows, seen_pixel[extra]])
+    cols_patch = np.concatenate([cols_patch, seen_patch[extra]])
+    weights = np.concatenate([weights, seen_area[extra]])
     wsum = np.bincount(cols_patch, weights=weights, minlength=n_patches)
     mavg = sp.csr_matrix((weights / wsum[cols_patch], (cols_patch, rows)), shape=(n_patches, n_samples))
     nodes, node_quad, node_offset = _node_grid(quads, nu, nv)
@@ -516,11 +511,18 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
         light_ff[sel, k] = _form_factor_to_quad(inner, normal[quad[sel]], quad[sel], quads, int(lq), LIGHT_SAMPLES)
 
     report(progress, 3, steps, "projector")
-    # every sample is lit by its nearest projector pixel unless a shadow ray to the projector
-    # is blocked (a co-axial projector lights no hidden sample: the camera ray is the same)
-    proj_index, _ = projector.nearest_pixel(points)
-    lit = live.copy()
-    lit[live] = _visible_from(projector, points[live], quad[live], quads)
+    pdirs = projector.pixel_directions()
+    phits = cast_rays(projector.position, pdirs, quads)
+    proj_pixel_quad = np.where((phits.quad >= 0) & phits.front, phits.quad, -1)
+    # camera pixels: lit by their nearest projector pixel unless a shadow ray to the
+    # projector is blocked; hidden samples: only where that pixel's own ray reaches their
+    # quad (so a co-axial projector never lights what the camera cannot see)
+    proj_index, inside = projector.nearest_pixel(points)
+    facing = np.einsum("ij,ij->i", projector.position - points, normal[qs]) > 0
+    lit = inside & facing & live
+    cand = np.flatnonzero(lit[:n_vis])
+    lit[cand] = ~occluded(points[cand], np.broadcast_to(projector.position, (cand.size, 3)), quads)
+    lit[n_vis:] &= _seen_by(projector, proj_pixel_quad, points[n_vis:], quad[n_vis:], normal)
     to_p = projector.position - points
     dist = np.linalg.norm(to_p, axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -569,23 +571,6 @@ def _mixed_pixels(scene: Scene, camera: View, projector: View, pixel_quad, a, b,
             for dx in (-1, 0, 1):
                 out |= k[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] != k[1:1 + h, 1:1 + w]
     return np.flatnonzero(out.ravel())
-
-
-def _patch_of(a: np.ndarray, b: np.ndarray, q: np.ndarray, nu, nv, offset) -> np.ndarray:
-    """Patch holding each point at local coordinates ``(a, b)`` of quad ``q``."""
-    pu = np.minimum((a * nu[q]).astype(np.int64), nu[q] - 1)
-    pv = np.minimum((b * nv[q]).astype(np.int64), nv[q] - 1)
-    return offset[q] + pu * nv[q] + pv
-
-
-def _visible_from(view: View, points: np.ndarray, quad: np.ndarray, quads: Quads) -> np.ndarray:
-    """Whether an unblocked ray of ``view`` reaches each point (on ``quad``) from the front,
-    inside the frame."""
-    _, inside = view.nearest_pixel(points)
-    inside &= np.einsum("ij,ij->i", view.position - points, quads.normal[quad]) > 0
-    cand = np.flatnonzero(inside)
-    inside[cand] = ~occluded(points[cand], np.broadcast_to(view.position, (cand.size, 3)), quads)
-    return inside
 
 
 def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray,
