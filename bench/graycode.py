@@ -2,7 +2,8 @@
 
 Renders the Gray-code sequence of a 1024×768 projector into a 640×480 uint8 camera through a
 smooth warp (with blur and noise), decodes every camera pixel both ways, checks that they
-agree wherever both decode, and prints the times and their ratio.
+agree wherever both decode, and prints the times and their ratio; then the calibration's XOR
+code (which OpenCV cannot decode), rendered and decoded the same way.
 
 Run: .venv/bin/python bench/graycode.py [--camera 480x640] [--projector 768x1024]
 """
@@ -22,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from engine.calibrate import decode_gray_code, gray_code_patterns  # noqa: E402
 
 
-def render(cam, proj, seed=0):
+def render(cam, proj, seed=0, code="gray"):
     h, w = cam
     hp, wp = proj
     v, u = np.indices(cam, dtype=np.float32)
@@ -31,7 +32,7 @@ def render(cam, proj, seed=0):
     rng = np.random.default_rng(seed)
     albedo = (0.4 + 0.5 * rng.random(cam)).astype(np.float32)
     out = []
-    for img in gray_code_patterns(proj):
+    for img in gray_code_patterns(proj, code=code):
         plane = cv2.remap(img[..., 0], x, y, cv2.INTER_LINEAR, borderValue=0)
         plane = cv2.GaussianBlur(plane, (0, 0), 0.5)
         val = 15 + 220 * albedo * plane + rng.normal(0, 1.5, cam)
@@ -63,6 +64,7 @@ def main() -> None:
     cam = tuple(int(s) for s in a.camera.split("x"))
     proj = tuple(int(s) for s in a.projector.split("x"))
     caps = render(cam, proj)
+    xor_caps = render(cam, proj, code="xor")
     pats = caps[:-2]
     print(f"camera {cam[1]}×{cam[0]}, projector {proj[1]}×{proj[0]}, {len(pats)} pattern images (uint8)")
 
@@ -73,21 +75,26 @@ def main() -> None:
     times = []
     for _ in range(a.repeat):
         t0 = time.perf_counter()
-        c = decode_gray_code(pats, proj)
+        c = decode_gray_code(pats, proj, code="gray")
         times.append(time.perf_counter() - t0)
     t_np = min(times)
     t0 = time.perf_counter()
-    cs = decode_gray_code(caps, proj)  # with white/black: shadow mask too
+    cs = decode_gray_code(caps, proj, code="gray")  # with white/black: shadow mask too
     t_shadow = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    cx = decode_gray_code(xor_caps, proj)
+    t_xor = time.perf_counter() - t0
 
     agree = np.array_equal(c.valid, ok) and np.array_equal(c.x[ok], x[ok]) and np.array_equal(c.y[ok], y[ok])
     print(f"decoded: {ok.mean():.1%} of camera pixels; agreement with OpenCV: {'exact' if agree else 'MISMATCH'}")
     print(f"with shadow mask: {cs.summary()}")
+    print(f"XOR code, with shadow mask: {cx.summary()}")
     print()
     print(f"{'method':<44}{'time':>12}{'ratio':>10}")
     print(f"{'OpenCV getProjPixel, one call per pixel':<44}{t_cv * 1e3:>10.1f} ms{1.0:>9.1f}x")
     print(f"{f'decode_gray_code (numpy, best of {a.repeat})':<44}{t_np * 1e3:>10.1f} ms{t_cv / t_np:>9.0f}x")
     print(f"{'decode_gray_code + white/black shadow mask':<44}{t_shadow * 1e3:>10.1f} ms{t_cv / t_shadow:>9.0f}x")
+    print(f"{'the same, XOR code':<44}{t_xor * 1e3:>10.1f} ms{t_cv / t_xor:>9.0f}x")
     if not agree:
         raise SystemExit("decoders disagree")
 

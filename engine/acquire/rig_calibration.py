@@ -97,7 +97,7 @@ def calibrate_rig(
     report_ = exposure_report(white, saturated=recorder.last_saturated, black=black)
     noise = _measure_noise(recorder, proj_res)
     gray = gray_code_patterns(proj_res)
-    gray_caps = [recorder.capture(f"cal-gray-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(gray)]
+    gray_caps = [recorder.capture(f"cal-xor-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(gray)]
     corr = decode_gray_code(gray_caps, proj_res)
     if not corr.valid.any():
         raise InputError("no camera pixel decoded the Gray code: "

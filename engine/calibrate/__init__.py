@@ -24,6 +24,7 @@ from engine.calibrate.crosstalk import Crosstalk, crosstalk_patterns, fit_crosst
 from engine.calibrate.direct import DirectImage, direct_image, high_frequency_patterns
 from engine.calibrate.exposure import AutoExposure, ExposureReport, black_frame, exposure_report, projector_lit
 from engine.calibrate.graycode import (
+    GRAY_CODES,
     Correspondence,
     PixelStatus,
     decode_gray_code,
@@ -55,6 +56,7 @@ __all__ = [
     "Crosstalk",
     "DirectImage",
     "ExposureReport",
+    "GRAY_CODES",
     "PixelStatus",
     "ProjectorMap",
     "ProjectorResponse",

@@ -1,4 +1,4 @@
-"""Gray-code patterns and decoding: agreement with OpenCV, accuracy, dtypes, bad input."""
+"""Gray-code patterns and decoding: agreement with OpenCV, accuracy, interreflections, dtypes, bad input."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from engine.calibrate import (
+    GRAY_CODES,
     Correspondence,
     PixelStatus,
     decode_gray_code,
@@ -64,7 +65,8 @@ def _warp_at(u, v):
 
 @pytest.fixture(scope="module")
 def captures():
-    return render(gray_code_patterns(PROJ))
+    """OpenCV's Gray code (``code="gray"``), which OpenCV's decoder can check."""
+    return render(gray_code_patterns(PROJ, code="gray"))
 
 
 def opencv_decode(images, proj, threshold=5):
@@ -84,7 +86,7 @@ def opencv_decode(images, proj, threshold=5):
 
 
 def test_patterns_are_opencvs_plus_white_and_black():
-    seq = gray_code_patterns(PROJ)
+    seq = gray_code_patterns(PROJ, code="gray")
     ok, ref = cv2.structured_light.GrayCodePattern.create(PROJ[1], PROJ[0]).generate()
     assert len(seq) == len(ref) + 2 == 2 * sum(gray_code_bits(PROJ)) + 2
     for img, r in zip(seq, ref, strict=False):  # seq ends with white and black, OpenCV's does not
@@ -103,7 +105,7 @@ def test_bit_count_matches_opencv(proj):
 
 def test_agrees_with_opencv_getprojpixel(captures):
     pats = captures[:-2]
-    ours = decode_gray_code(pats, PROJ)
+    ours = decode_gray_code(pats, PROJ, code="gray")
     x, y, ok = opencv_decode(pats, PROJ)
     # A meaningful test: most pixels decode, but blur and the projector's edge reject some.
     assert 0.4 < ok.mean() < 0.9
@@ -113,8 +115,10 @@ def test_agrees_with_opencv_getprojpixel(captures):
     assert ours.x.dtype == np.int32 and np.all(ours.x[~ok] == -1)
 
 
-def test_decoded_pixels_are_where_the_warp_says(captures):
-    c = decode_gray_code(captures, PROJ)  # with the white and black captures last
+@pytest.mark.parametrize("code", GRAY_CODES)
+def test_decoded_pixels_are_where_the_warp_says(code, captures):
+    caps = captures if code == "gray" else render(gray_code_patterns(PROJ, code=code))
+    c = decode_gray_code(caps, PROJ, code=code)  # with the white and black captures last
     tx, ty = true_warp()
     ok = c.valid
     assert ok.mean() > 0.4
@@ -129,7 +133,7 @@ def test_decoded_pixels_are_where_the_warp_says(captures):
 
 def test_dtypes_and_colour_give_the_same_answer(captures):
     pats, white, black = captures[:-2], captures[-2], captures[-1]
-    ref = decode_gray_code(pats, PROJ, white=white, black=black, threshold=4.5, shadow_threshold=40)
+    ref = decode_gray_code(pats, PROJ, white=white, black=black, threshold=4.5, shadow_threshold=40, code="gray")
     variants = [
         ([p.astype(np.uint16) * 257 for p in pats], white.astype(np.uint16) * 257, black.astype(np.uint16) * 257,
          4.5 * 257, 40 * 257),
@@ -139,15 +143,16 @@ def test_dtypes_and_colour_give_the_same_answer(captures):
         (np.stack(pats), white, black, 4.5, 40),
     ]
     for p, w, b, t, s in variants:
-        got = decode_gray_code(p, PROJ, white=w, black=b, threshold=t, shadow_threshold=s)
+        got = decode_gray_code(p, PROJ, white=w, black=b, threshold=t, shadow_threshold=s, code="gray")
         np.testing.assert_array_equal(got.status, ref.status)
         np.testing.assert_array_equal(got.x, ref.x)
         np.testing.assert_array_equal(got.y, ref.y)
 
 
 def test_float_default_threshold_scales_with_the_data(captures):
-    a = decode_gray_code([p / 255.0 for p in captures], PROJ)
-    b = decode_gray_code([p * 1e-3 for p in captures[:-2]] + [captures[-2] * 1e-3, captures[-1] * 1e-3], PROJ)
+    a = decode_gray_code([p / 255.0 for p in captures], PROJ, code="gray")
+    b = decode_gray_code([p * 1e-3 for p in captures[:-2]] + [captures[-2] * 1e-3, captures[-1] * 1e-3], PROJ,
+                         code="gray")
     # identical up to pixels sitting exactly on the per-pixel contrast threshold, where
     # rounding of the scaled data decides
     assert np.mean(a.status != b.status) < 0.005
@@ -161,11 +166,12 @@ def test_inputs_are_not_modified(captures):
         np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("proj", [(8, 8), (5, 13), (64, 33)])
-def test_coaxial_ideal_rig_decodes_every_pixel(proj):
-    seq = gray_code_patterns(proj)
+@pytest.mark.parametrize("code", GRAY_CODES)
+@pytest.mark.parametrize("proj", [(8, 8), (5, 13), (64, 33), (3, 2)])
+def test_coaxial_ideal_rig_decodes_every_pixel(proj, code):
+    seq = gray_code_patterns(proj, code=code)
     caps = [(p[..., 0] * 0.8 + 0.05).astype(np.float32) for p in seq]
-    c = decode_gray_code(caps, proj)
+    c = decode_gray_code(caps, proj, code=code)
     ident = Correspondence.identity(proj)
     np.testing.assert_array_equal(c.x, ident.x)
     np.testing.assert_array_equal(c.y, ident.y)
@@ -174,7 +180,7 @@ def test_coaxial_ideal_rig_decodes_every_pixel(proj):
 
 def test_low_contrast_and_out_of_range_are_told_apart():
     proj = (3, 5)  # 3 column bits: codes 5..7 exist but are beyond the projector
-    seq = gray_code_patterns(proj)
+    seq = gray_code_patterns(proj, code="gray")
     caps = [p[..., 0].astype(np.float32) for p in seq[:-2]]
     # Camera pixel (0, 0) sees projector column 6 (Gray 101); pixel (0, 1) sees no contrast.
     gray6 = [1, 0, 1]
@@ -182,7 +188,7 @@ def test_low_contrast_and_out_of_range_are_told_apart():
         caps[2 * k][0, 0], caps[2 * k + 1][0, 0] = float(g), float(1 - g)
     for c in caps:
         c[0, 1] = 0.5
-    out = decode_gray_code(caps, proj, threshold=0.1)
+    out = decode_gray_code(caps, proj, threshold=0.1, code="gray")
     assert out.status[0, 0] == PixelStatus.OUT_OF_RANGE
     assert out.status[0, 1] == PixelStatus.LOW_CONTRAST
     assert out.counts() == {"decoded": 13, "unlit": 0, "low_contrast": 1, "out_of_range": 1}
@@ -215,6 +221,39 @@ def test_bad_inputs():
         gray_code_patterns((1, 8))
     with pytest.raises(InputError, match="NaN"):
         decode_gray_code([np.full((4, 4), np.nan, np.float32)] * 8, (4, 4))
+    with pytest.raises(InputError, match="code must be one of 'xor', 'gray', got 'binary'"):
+        decode_gray_code(caps, (4, 4), code="binary")
+    with pytest.raises(InputError, match="code must be one of"):
+        gray_code_patterns((4, 4), code="binary")
+
+
+def concave_corner(patterns, *, grazing=0.1, coupling=0.3):
+    """Co-axial float captures of a concave corner: columns < W/2 a frontal wall, the rest a grazing one.
+
+    The grazing wall's own direct light is ``grazing`` of the frontal one's; it also receives
+    ``coupling`` times the frontal wall's lit fraction as interreflected light (and sends a
+    tenth of that back) — more than its own direct light whenever most of the frontal wall is lit.
+    """
+    out = []
+    for p in patterns:
+        plane = p[..., 0].astype(np.float64)
+        half = plane.shape[1] // 2
+        direct = plane * np.where(np.arange(plane.shape[1]) < half, 1.0, grazing)
+        from_front, from_side = plane[:, :half].mean(), plane[:, half:].mean() * grazing
+        glob = np.where(np.arange(plane.shape[1]) < half, 0.1 * coupling * from_side, coupling * from_front)
+        out.append((0.02 + direct + glob).astype(np.float32))
+    return out
+
+
+def test_xor_code_decodes_a_concave_corner_the_gray_code_gets_wrong():
+    proj = (8, 64)
+    truth = Correspondence.identity(proj)
+    wrong = {}
+    for code in GRAY_CODES:
+        c = decode_gray_code(concave_corner(gray_code_patterns(proj, code=code)), proj, code=code)
+        wrong[code] = int((c.valid & (c.x != truth.x)).sum() + (~c.valid).sum())
+    assert wrong["gray"] > 100  # the interreflected light flips the most significant column bit
+    assert wrong["xor"] == 0
 
 
 def test_correspondence_validates_and_is_read_only():

@@ -90,7 +90,7 @@ def _swap(path: Path, a: str, b: str) -> None:
     (path / "manifest.json").write_text(json.dumps(manifest))
 
 
-@pytest.mark.parametrize("pair", [("cal-gray-000", "cal-gray-001"), ("acq-photograph", "acq-r1-rgb")])
+@pytest.mark.parametrize("pair", [("cal-xor-000", "cal-xor-001"), ("acq-photograph", "acq-r1-rgb")])
 def test_swapped_captures_are_refused(captured, tmp_path, albedit, tally, pair):
     _swap(captured, *pair)
     tally.injected += 1

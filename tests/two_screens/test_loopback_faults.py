@@ -38,7 +38,7 @@ def test_bench_faults_end_in_one_plain_line(tmp_path, capsys, rig_options, fault
     status, lines = run_cli(capsys, "calibrate", session, "--rig", f"loopback:{SCENE}")
     assert status == 1 and re.match(ERROR + message, lines[-1]), lines  # a line of its own, after the bar
     kept = [c.name for c in Session.open(session).captures]
-    assert kept[:2] == ["cal-black", "cal-white"] and "cal-gray-001" not in kept  # nothing taken is lost
+    assert kept[:2] == ["cal-black", "cal-white"] and "cal-xor-001" not in kept  # nothing taken is lost
     if fault == "drop":  # run again: the captures taken are reused, the calibration completes
         del rig_options["loopback"]["faults"]
         status, lines = run_cli(capsys, "calibrate", session, "--rig", f"loopback:{SCENE}")
