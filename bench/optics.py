@@ -24,7 +24,7 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
   co-axial one, and the render noise (spp) of a sharp coat.
 * ``fig3`` — a diffuse box on a glossy floor (``mitsuba:floor``): the box's reflection.
 * ``fig12`` — a textured target (``mitsuba:textured`` and ``virtual:textured``), κ = (2, 0.125, 1.2).
-* ``ratio`` — interreflection-to-direct ratio on the Cornell right wall (ceiling light only):
+* ``ratio`` — interreflection-to-direct ratio on the Cornell right wall (ceiling light, projector white):
   the virtual rig's radiosity at several patch sizes against Mitsuba's path tracer.
 
 Errors are ‖ours − truth‖₂ / ‖truth‖₂ (the lamp's pixels left out of "image"); the Monte
@@ -489,7 +489,7 @@ def part_ratio(args):
         t = time.perf_counter()
         v = devices.open_rig("virtual:cornell", ideal=True, resolution=(res, res), patch_size=patch, cache_dir=False)
         setup = time.perf_counter() - t
-        r = v._renderer
+        r = v.renderer
         for light, (ambient, emitted) in {"ceiling light": (True, None), "projector white": (False, white)}.items():
             e = r.direct_light(emitted, ambient=ambient, dtype=np.float64)
             direct = r.to_image(r.rho * e, ambient=ambient)
