@@ -348,13 +348,17 @@ def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Dec
     own *= np.where(fits, pixel / np.where(fits, total, 1.0), 1.0)[None]
     own[0] += np.where(fits, 0.0, pixel - total)
     target_part = np.maximum(own - (1 - wgt)[None] * pixel[None] * s_out, 0)
+    fy, fx = vy + rows.start, vx + cols.start
+    strip, found = _strip(decomposition.components, decomposition.target & (photo > 0).all(axis=-1), cov, fy, fx)
+    # where the target reaches the edge in a line, its part is the strip's own components (never more
+    # than the pixel holds, so that the neighbour's part stays non-negative and κ = 1 gives I)
+    target_part[:, found] = np.clip(strip[:, found], 0, np.maximum(own[:, found], 0))
     other = own - target_part
     packed = np.zeros((k, len(vy), c))
     packed[0] = target_part[0]  # the target part's direct light: κ^1
     for m in range(k - 1):
         packed[m + 1] += target_part[m + 1]  # its m+1-th interaction: κ^{m+2}
         packed[m] += other[m + 1]  # the neighbour's C R^m L_d: κ^{m+1}
-    fy, fx = vy + rows.start, vx + cols.start
     components = decomposition.components.copy()
     new_unreached = decomposition.unreached.copy()
     components[:, fy, fx] = packed.astype(components.dtype)
@@ -374,3 +378,54 @@ def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Dec
         residual,
         decomposition.covariance,  # an edge pixel keeps its unknowns' variance: its light is only re-divided
     ), blended
+
+
+def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray]:
+    """The target part of edge pixels ``(ys, xs)``: ``α`` times the target's components extrapolated to the strip.
+
+    Parameters
+    ----------
+    components : (K, H, W, C) float
+        The decomposition's components (the target's ``R^i L_d`` on ``inside``).
+    inside : (H, W) bool
+        Decomposed target pixels that can be extrapolated from (lit).
+    cov : (H, W) float
+        Coverage.
+    ys, xs : (N,) int
+        The edge pixels.
+
+    Returns
+    -------
+    part : (K, N, C) float64
+        ``α c̃_i`` with ``c̃_i`` the mean over the 8 directions ``d`` of the linear extrapolation of
+        ``R^i L_d`` from two decomposed pixels along ``d`` (the nearest of ``q + d, q + 2d, q + 3d``)
+        to the target strip's centre, which lies ``(1 − α) / 2`` pixel from ``q``'s centre towards the
+        target: from ``p_1 = q + d`` it is ``(1 + α) / 2`` pixel away.
+    found : (N,) bool
+        Edge pixels with at least one such pair.
+    """
+    k, h, w, c = components.shape
+    alpha = cov[ys, xs].astype(np.float64)
+    total = np.zeros((k, len(ys), c))
+    count = np.zeros(len(ys))
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)):
+        at = []
+        for i in range(4):
+            py, px = ys + i * dy, xs + i * dx
+            ok = (py >= 0) & (py < h) & (px >= 0) & (px < w)
+            py, px = np.clip(py, 0, h - 1), np.clip(px, 0, w - 1)
+            at.append((py, px, ok & inside[py, px]))
+        done = np.zeros(len(ys), bool)
+        for i, j in ((1, 2), (2, 3), (1, 3)):  # the nearest two decomposed pixels along d
+            ok = at[i][2] & at[j][2] & ~done
+            if not ok.any():
+                continue
+            near = components[:, at[i][0][ok], at[i][1][ok]].astype(np.float64)
+            far = components[:, at[j][0][ok], at[j][1][ok]].astype(np.float64)
+            reach = (i - 1 + (1 + alpha[ok]) / 2) / (j - i)  # from p_i to the strip, in steps p_i − p_j
+            total[:, ok] += near + (near - far) * reach[None, :, None]
+            count += ok
+            done |= ok
+    found = count > 0
+    part = alpha[None, :, None] * total / np.maximum(count, 1)[None, :, None]
+    return part, found
