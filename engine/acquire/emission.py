@@ -157,11 +157,11 @@ class Emitter:
                 if peak <= 0:
                     continue
                 # the stand-in raises the light next to the edge but not the scale (a lower scale
-                # would dim the whole pattern against the camera noise): where it would pass τ
-                # it is cut, and the shortfall accounts for the direct light actually given
+                # would dim the whole pattern against the camera noise): what passes τ (where the
+                # edge is brightest) goes into a capture of its own, and the shortfall takes the
+                # raised direct light out of both
                 scale = self.tau / peak
                 proj = self._warp(plane * scale if boost is None else plane * boost * scale)
-                # the raised light beyond τ (where the edge is brightest) goes into a capture of its own
                 over = np.maximum(proj - self.tau, 0.0) if boost is not None else None
                 proj = np.clip(proj, 0.0, self.tau)  # hole filling may overshoot by rounding only
                 short = None
