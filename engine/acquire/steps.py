@@ -76,7 +76,8 @@ class CaptureSettings:
                    stand_in=values.get("stand_in", True))
 
     def captures_per_step(self) -> int:
-        """Captures one re-emission costs."""
+        """Captures one re-emission costs at most, but for a soft mask's stand-in: where its raised
+        light passes τ each capture may take one more (:class:`engine.acquire.emission.Emitter`)."""
         return (3 if self.per_channel else 1) * (2 if self.negative == Negative.SPLIT else 1)
 
 
