@@ -1,6 +1,7 @@
 """The target part of a soft mask's edge pixels cannot be re-emitted: the emitted pixels next to
 it stand in for it, so that the observations keep to Eq. 6 (against the virtual rig's truth)."""
 
+from contextlib import contextmanager
 from math import comb
 
 import numpy as np
@@ -14,11 +15,17 @@ from engine.recolor import recolor
 KAPPA = np.array([0.5, 1.2, 0.8])
 
 
-def test_standing_in_for_the_edge_makes_the_observations_those_of_the_whole_target(tmp_path):
-    with devices.open_rig("virtual:cornell", ideal=True, resolution=(32, 32), supersample=4,
-                          cache_dir=tmp_path) as rig:
+@contextmanager
+def calibrated_box(size: int, cache):
+    """The ideal Cornell box with 4×4-supersampled pixels, calibrated: (rig, recorder, calibration)."""
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(size, size), supersample=4,
+                          cache_dir=cache) as rig:
         rec = Recorder(rig, None)
-        cal = calibrate_rig(rec, rig_name=rig.identity)
+        yield rig, rec, calibrate_rig(rec, rig_name=rig.identity)
+
+
+def test_standing_in_for_the_edge_makes_the_observations_those_of_the_whole_target(tmp_path):
+    with calibrated_box(32, tmp_path) as (rig, rec, cal):
         cov, hard = rig.coverage["right_wall"], rig.targets["right_wall"]
         terms = rig.truth.interactions(hard, 10)
         # the observations if the whole target surface, edge strip included, re-emitted (Eq. 6 and 9)
@@ -121,10 +128,7 @@ def test_the_wall_with_its_edge_is_recolored_almost_as_well_as_its_interior(tmp_
     """Issue 13's edge rule against the truth at 48² (at 128² it holds within 1.5×: bench/optics.py)."""
     import cv2
 
-    with devices.open_rig("virtual:cornell", ideal=True, resolution=(48, 48), supersample=4,
-                          cache_dir=tmp_path) as rig:
-        rec = Recorder(rig, None)
-        cal = calibrate_rig(rec, rig_name=rig.identity)
+    with calibrated_box(48, tmp_path) as (rig, rec, cal):
         cov, hard = rig.coverage["right_wall"], rig.targets["right_wall"]
         acq = acquire_single(rec, cal, cov, 4)
         d = acq.target.decompose(acq.observations)
