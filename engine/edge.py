@@ -422,12 +422,12 @@ def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray]:
     total = np.zeros((k, len(ys), c))
     count = np.zeros(len(ys))
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)):
-        at = []
-        for i in range(4):
+        at = {}  # the pixels 1, 2 and 3 steps along d: row, column, decomposed
+        for i in (1, 2, 3):
             py, px = ys + i * dy, xs + i * dx
             ok = (py >= 0) & (py < h) & (px >= 0) & (px < w)
             py, px = np.clip(py, 0, h - 1), np.clip(px, 0, w - 1)
-            at.append((py, px, ok & inside[py, px]))
+            at[i] = (py, px, ok & inside[py, px])
         done = np.zeros(len(ys), bool)
         for i, j in ((1, 2), (2, 3), (1, 3)):  # the nearest two decomposed pixels along d
             ok = at[i][2] & at[j][2] & ~done

@@ -491,7 +491,10 @@ def decode_gray_code(
             kb = first_bit + base
             _pair(grey[2 * kb], grey[2 * kb + 1], np.maximum(thr, XOR_BASE_RELATIVE_THRESHOLD * best), base_bit, ok)
         for k in range(first_bit, first_bit + nbits):
-            _pair(grey[2 * k], grey[2 * k + 1], thr, bit, ok)
+            if base is not None and k == first_bit + base:
+                bit[...] = base_bit  # read above, with its stricter threshold
+            else:
+                _pair(grey[2 * k], grey[2 * k + 1], thr, bit, ok)
             if base is not None and k < first_bit + base:
                 np.logical_xor(bit, base_bit, out=bit)  # the shown pattern was the bit XOR the base
             np.logical_xor(binary, bit, out=binary)  # Gray → binary, most significant bit first
