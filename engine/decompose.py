@@ -52,9 +52,11 @@ class Decomposition:
         :meth:`standard_deviation`.
     blended : (H, W) bool or None
         Non-target pixels that :func:`engine.edge.blend_edges` re-packed as a mix of a soft
-        mask's target part and its neighbour's (index i holds the target's ``R^{i-1} L_d``
-        and the neighbour's ``C R^i L_d`` together): a filter across pixels must leave them
-        out (:func:`engine.denoise.denoise_components`). None: no such pixel.
+        mask's target part and its neighbour's (index i holds the target part's ``R^i L_d``,
+        its direct light at i = 0, beside the neighbour's ``C R^i L_d``): their components
+        are nothing like either side's, so a filter across pixels must keep them apart
+        (:func:`engine.denoise.denoise_components`, :func:`engine.trust.prepare_trust`).
+        None: no such pixel.
     """
 
     components: np.ndarray

@@ -85,9 +85,9 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     # every outside component but the one that absorbs the change
     inside_ids = [i for i in range(k) if i >= 1]
     outside_ids = [i for i in range(k) if first_outside <= i < decomposition.outside_order]
-    # a soft mask's blended edge pixels pack two surfaces' parts in other slots than either side:
-    # filtered with the neighbour's pixels they took its shares (ideal supersampled Cornell box, 64²,
-    # κ = (2, 0.125, 8), radius 4, no noise: the edge pixels' error 2.0 % → 20 %), so they are kept
+    # a soft mask's blended edge pixels hold the target part's light (its direct light too) beside the
+    # neighbour's: filtered with the neighbour's pixels, each took the other's shares (ideal supersampled
+    # Cornell box, 64², κ = (2, 0.125, 8), radius 4, no noise: the edge pixels' error 20 %, 2.0 % kept)
     outside = ~target if decomposition.blended is None else ~target & ~decomposition.blended
     jobs = [(target, inside_ids), (outside, outside_ids)]
     smoothed = comps.copy()

@@ -483,7 +483,7 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
     shares = np.zeros((n, h, w, c), np.float32)
     share_cov = np.zeros((n * (n + 1) // 2, h, w, c), np.float32)
     photo_share = np.zeros((n, h, w, c), np.float32)
-    # a soft mask's blended edge pixels pack two surfaces' parts in other slots than the neighbour's pixels:
+    # a soft mask's blended edge pixels hold the target part's light (its direct light too) beside the neighbour's:
     # their shares are smoothed among themselves only, and never read by the neighbour's
     regions = [d.target, ~d.target] if d.blended is None else [d.target, ~d.target & ~d.blended, d.blended & ~d.target]
     for ch in range(c):

@@ -89,7 +89,7 @@ def test_small_target_is_filtered_in_its_window_exactly_as_in_the_whole_image():
 
 
 def test_blended_edge_pixels_are_neither_filtered_nor_read():
-    """A soft mask's blended edge pixels pack two surfaces' parts in other slots than their neighbours'."""
+    """A soft mask's blended edge pixels hold the target part's light beside the neighbour's: kept apart."""
     from dataclasses import replace
 
     truth, noisy, photo = _scene(2)
@@ -97,7 +97,7 @@ def test_blended_edge_pixels_are_neither_filtered_nor_read():
     edge[:, 38] = True  # the column beside the target (columns 39.. here)
     assert not (edge & noisy.target).any()
     spiked = noisy.components.copy()
-    spiked[:, edge] *= 50.0  # packed otherwise: nothing like the neighbour's components
+    spiked[:, edge] *= 50.0  # the target part's direct light: nothing like the neighbour's components
     d = replace(noisy, components=spiked, blended=edge)
     out = denoise_components(d, photo)
     np.testing.assert_array_equal(out.components[:, edge], spiked[:, edge])

@@ -188,7 +188,7 @@ def test_orders_given_one_at_a_time_are_prepared_alike_and_must_increase(noisy_c
 
 
 def test_blended_edge_pixels_are_smoothed_apart_from_the_neighbours_pixels(noisy_cornell):
-    """A soft mask's blended edge pixels pack their parts in other slots than their neighbours:
+    """A soft mask's blended edge pixels hold the target part's light beside the neighbour's:
     their shares must not leak into the neighbour's smoothed shares (nor the other way)."""
     from dataclasses import replace
 
