@@ -94,9 +94,10 @@ class Truth:
         """The surface a camera mask stands for, as samples.
 
         Pixel centres follow the mask. The sub-samples of a mixed pixel in or next to the
-        mask follow the *surfaces* the mask covers — quads with at least half of their
-        (unmixed) pixels painted — so that a target's edge is recolored where the target is,
-        whether or not the artist painted the mixed pixel, as on a real object.
+        mask follow the *surfaces* the mask covers — quads with at least half of the pixels
+        whose centre they hold painted — so that a target's edge is recolored where the target
+        is, whether or not the artist painted the mixed pixel, as on a real object. (Counted on
+        every pixel, mixed ones too: under a posed projector nearly every pixel is mixed.)
         """
         s = self._r.setup
         n = self._r.n_pixels
@@ -104,7 +105,7 @@ class Truth:
         flat = mask.ravel()
         sel[:n] = flat
         if len(s.sub_pixel):
-            pq = np.where(s.quad[:n] >= 0, s.quad[:n], -1)  # unmixed pixels' quads
+            pq = np.asarray(s.pixel_quad)[:n]  # the quad at each pixel's centre
             nq = len(self.scene.quads)
             seen = np.bincount(pq[pq >= 0], minlength=nq)
             painted = np.bincount(pq[(pq >= 0) & flat], minlength=nq)
