@@ -16,7 +16,8 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
 * ``posed`` — a projector beside the camera (``projector="offset"``, 0.25 m to its right) against
   the co-axial one, on the supersampled ideal virtual wedge (24² and 48², left wall, order 4):
   with and without :func:`engine.calibrate.projector_spread` (the direct light of each
-  re-emission completed where projector pixels straddle camera pixels and light edge pixels).
+  re-emission completed where projector pixels straddle camera pixels and light edge pixels);
+  then the path-traced wedge (``mitsuba:wedge``, no coat), co-axial and posed.
 * ``realistic`` — the realistic demo's rig (``albedit demo --realistic``: virtual Cornell box
   128², 4×4 supersampled pixels, projector at half the camera's resolution, camera noise, 16
   frames a capture), κ = (2, 0.125, 8), noise reduction sized from the measured noise as the
@@ -338,6 +339,12 @@ def part_posed(args):
                                             (wall, interior, wall & ~interior, None)) + " %")
                 print(f"{res:4d} {pose:<9} {label:<28} {cells[0]:>34} {cells[1]:>34}", flush=True)
             rig.close()
+    if args.quick:
+        return
+    print(f"-- path-traced (mitsuba:wedge 24², {args.fig13_spp} spp, no coat, true coverage): ours vs the paint truth, "
+          "naive, (noise floor)")
+    for pose in ("coaxial", "offset"):
+        print(f"{pose:<9} {_cell(fig13_cell(0.0, 0.009, res=24, spp=args.fig13_spp, pose=pose))}", flush=True)
 
 
 def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibrations=None, components=False):

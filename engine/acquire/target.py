@@ -213,9 +213,10 @@ def prepare_target(
         decode claim no projector pixel.
     spread : bool
         Also measure how the target's camera pixels straddle projector pixels (8 more captures,
-        :func:`engine.calibrate.spread_patterns`): :attr:`PreparedTarget.spread`, which
-        completes each re-emission's direct light where a posed projector's pixels do not line
-        up with the camera's. False when only D is wanted.
+        :func:`engine.calibrate.spread_patterns`): :attr:`PreparedTarget.spread`, and a soft
+        mask's edge pixels' D (:attr:`PreparedTarget.edge_direct`), which complete each
+        re-emission's direct light where a posed projector's pixels do not line up with the
+        camera's. False when only D is wanted (or to measure what they are worth).
 
     Returns
     -------
@@ -250,7 +251,7 @@ def prepare_target(
     # a soft mask's edge pixels are measured too (not emitted): the light a posed projector's
     # emitted pixels put on their target strip is taken out of each re-emission (Emitter.shortfall)
     edge_px = np.zeros_like(target)
-    if coverage is not None:
+    if coverage is not None and spread:
         corr, edge_px = _edge_decodes(corr, target, coverage > 0)
     measured = painted_valid | edge_px
     lit_full, unlit_full = _neighbourhood_states(patterns, corr, measured, footprint)
