@@ -54,7 +54,7 @@ from engine.errors import InputError
 from engine.imageio import atomic_write
 from engine.progress import report
 
-MODEL_VERSION = 10
+MODEL_VERSION = 11  # not 10: a reverted set-up (2b6a7e7) left version-10 caches behind
 #: Most patches a scene may be cut into: their transport is dense in patches (memory ~ patches²).
 MAX_PATCHES = 8000
 
