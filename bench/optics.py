@@ -14,6 +14,11 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
   and the soft masks with noise reduction (radius 4) for κ = (2, 0.125, 8).
 * ``edge`` — what the edge still costs on that box (48²): oracles that re-emit the edge strip
   exactly or take the edge pixels' neighbour part from the truth.
+* ``posed`` — a projector beside the camera (``projector="offset"``, 0.25 m to its right) against
+  the co-axial one, on the supersampled ideal virtual wedge (24² and 48², left wall, order 4):
+  with and without :func:`engine.calibrate.projector_spread` (the direct light of each
+  re-emission completed where projector pixels straddle camera pixels and light edge pixels);
+  then the path-traced wedge (``mitsuba:wedge``, no coat), co-axial and posed.
 * ``realistic`` — the realistic demo's rig (``albedit demo --realistic``: virtual Cornell box
   128², 4×4 supersampled pixels, projector at half the camera's resolution, camera noise, 16
   frames a capture), κ = (2, 0.125, 8), noise reduction sized from the measured noise as the
@@ -31,7 +36,8 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
 Errors are ‖ours − truth‖₂ / ‖truth‖₂ (the lamp's pixels left out of "image"); the Monte
 Carlo noise of the truth renders is part of every mitsuba figure (the noise-floor column).
 
-Run: nice .venv/bin/python bench/optics.py [--parts cornell virtual realistic fig13 fig3 fig12] [--quick]
+Run: nice .venv/bin/python bench/optics.py [--parts cornell virtual edge posed realistic fig13 fig3 fig12 ratio]
+[--quick]
 """
 
 from __future__ import annotations
@@ -308,6 +314,43 @@ def part_edge(args):
 FIG13_KAPPA = np.array([1.5, 4.5, 0.5])
 
 
+def part_posed(args):
+    """A posed projector at a soft edge: the wedge's left wall, co-axial and posed, each way of completing."""
+    print(f"\n== posed projector: virtual:wedge, supersampled 4×4, ideal, left wall, κ = {FIG13_KAPPA.tolist()}, "
+          "order 4; error over wall + edge / interior / edge pixels / whole image ==")
+    variants = [("true coverage", "true", None),
+                ("true coverage, no stand-in", "true", CaptureSettings(stand_in=False)),
+                ("refined from the photograph", "soft", None), ("hard mask", "hard", None)]
+    print(f"{'res':>4} {'projector':<9} {'mask':<28} {'previous (no spread)':>34} {'now':>34}")
+    for res in ((24,) if args.quick else (24, 48)):
+        for pose in ("coaxial", "offset"):
+            rig = devices.open_rig("virtual:wedge", ideal=True, resolution=(res, res), supersample=4, projector=pose)
+            exp = Experiment(rig, "left", 4)
+            truth = exp.truth(FIG13_KAPPA)
+            cov = exp.coverage
+            wall, interior = cov > 0, interior_of(cov)
+            masks = {"true": cov, "hard": exp.hard}
+            for label, kind, settings in variants:
+                cells = []
+                for spread in (False, True):
+                    if kind == "soft" and "soft" not in masks:
+                        masks["soft"] = refine_mask(exp.hard, exp.photograph())
+                    base = settings or CaptureSettings()
+                    acq = exp.acquire(f"{kind}-{spread}-{label}", masks[kind],
+                                      CaptureSettings(stand_in=base.stand_in, spread=spread))
+                    img = recolor(_decomposition(acq, 0), FIG13_KAPPA)
+                    cells.append(" / ".join(f"{100 * relative_error(img, truth, m):5.2f}" for m in
+                                            (wall, interior, wall & ~interior, None)) + " %")
+                print(f"{res:4d} {pose:<9} {label:<28} {cells[0]:>34} {cells[1]:>34}", flush=True)
+            rig.close()
+    if args.quick:
+        return
+    print(f"-- path-traced (mitsuba:wedge 24², {args.fig13_spp} spp, no coat, true coverage): ours vs the paint truth, "
+          "naive, (noise floor)")
+    for pose in ("coaxial", "offset"):
+        print(f"{pose:<9} {_cell(fig13_cell(0.0, 0.009, res=24, spp=args.fig13_spp, pose=pose))}", flush=True)
+
+
 def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibrations=None, components=False):
     """One coat of the wedge's left wall: our recolor against the two truths, the naive one, the noise.
 
@@ -513,6 +556,7 @@ PARTS = {
     "cornell": part_cornell,
     "virtual": part_virtual,
     "edge": part_edge,
+    "posed": part_posed,
     "realistic": part_realistic,
     "fig13": part_fig13,
     "fig3": part_fig3,

@@ -6,8 +6,10 @@ the arrays every capture reuses:
 * **samples** — one per camera pixel (index ``i * W + j``; pixels that see no front surface
   are inert samples of albedo 0); then, when pixels are supersampled, ``s * s`` *sub-samples*
   for each *mixed* pixel — one whose 8-neighbourhood changes surface, texture cell or
-  projector shadow, so that its footprint may hold two of them (its centre sample is then
-  inert and the pixel is the mean of its sub-samples, as a sensor averages its footprint);
+  projector shadow, or whose footprint crosses a projector pixel's border (a posed
+  projector's pixels straddle the camera's), so that its footprint may hold two of them (its
+  centre sample is then inert and the pixel is the mean of its sub-samples, as a sensor
+  averages its footprint);
   then *hidden* samples: a regular grid on every quad, kept only where the camera does not
   see the surface. Each sample has a point, a quad, local coordinates and an area.
 * **patches** — each quad cut into a grid of cells about ``patch_size`` wide. The patch
@@ -52,7 +54,7 @@ from engine.errors import InputError
 from engine.imageio import atomic_write
 from engine.progress import report
 
-MODEL_VERSION = 9
+MODEL_VERSION = 11  # not 10: a reverted set-up (2b6a7e7) left version-10 caches behind
 #: Most patches a scene may be cut into: their transport is dense in patches (memory ~ patches²).
 MAX_PATCHES = 8000
 
@@ -545,11 +547,13 @@ def build(scene: Scene, geometry: Geometry, *, progress=None, form_factors=None)
 
 
 def _mixed_pixels(scene: Scene, camera: View, projector: View, pixel_quad, a, b, points, shape) -> np.ndarray:
-    """Pixels whose footprint may hold two surfaces, texture cells or projector shadow states.
+    """Pixels whose footprint may hold two surfaces, texture cells, projector shadow states or projector pixels.
 
     A pixel is mixed when a pixel of its 8-neighbourhood (itself included) differs from it
     in the quad seen, the texture cell seen, or whether an unblocked ray reaches the
-    projector from the pixel's centre point.
+    projector from the pixel's centre point; or when its footprint, mapped into the projector
+    through the centre points of its neighbours on the same quad, crosses a projector pixel's
+    border (a co-axial projector at the camera's resolution, or at half of it, never does).
     """
     h, w = shape
     n = h * w
@@ -564,13 +568,46 @@ def _mixed_pixels(scene: Scene, camera: View, projector: View, pixel_quad, a, b,
     lit = inside & facing & (pixel_quad >= 0)
     cand = np.flatnonzero(lit)
     lit[cand] = ~occluded(points[cand], np.broadcast_to(projector.position, (cand.size, 3)), scene.quads)
-    out = np.zeros((h, w), bool)
+    out = _straddles(projector, points, pixel_quad, inside, (h, w))
     for key in (pixel_quad, cell, lit.astype(np.int64)):
         k = np.pad(key.reshape(h, w), 1, mode="edge")
         for dy in (-1, 0, 1):
             for dx in (-1, 0, 1):
                 out |= k[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] != k[1:1 + h, 1:1 + w]
     return np.flatnonzero(out.ravel())
+
+
+def _straddles(projector: View, points, pixel_quad, inside, shape) -> np.ndarray:
+    """(H, W) bool: pixels whose footprint crosses a projector pixel's border.
+
+    The footprint's corners are the centre's projector position plus or minus half the
+    position's steps to the neighbouring pixels on the same quad (central differences, one-sided
+    at a quad's border), shrunk by 0.1 % so that a footprint whose border lies on a projector
+    pixel's (co-axial projectors) does not count.
+    """
+    h, w = shape
+    xy = projector.project(points)[0].reshape(h, w, 2)
+    quad = pixel_quad.reshape(h, w)
+    ok = (inside & (pixel_quad >= 0)).reshape(h, w)
+    half = []
+    for axis in (0, 1):  # rows, columns
+        fwd, back = np.zeros((h, w, 2)), np.zeros((h, w, 2))
+        n_f, n_b = np.zeros((h, w), bool), np.zeros((h, w), bool)
+        lo = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+        hi = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+        same = ok[lo] & ok[hi] & (quad[lo] == quad[hi])
+        step = np.where(same[..., None], xy[hi] - xy[lo], 0.0)
+        fwd[lo], n_f[lo] = step, same
+        back[hi], n_b[hi] = step, same
+        count = n_f.astype(np.float64) + n_b
+        half.append(0.5 * (fwd + back) / np.maximum(count, 1)[..., None])
+    out = np.zeros((h, w), bool)
+    own = np.rint(xy)
+    for sv in (-1, 1):
+        for su in (-1, 1):
+            corner = xy + 0.999 * (sv * half[0] + su * half[1])
+            out |= (np.rint(corner) != own).any(axis=-1)
+    return out & ok
 
 
 def _seen_by(view: View, pixel_quad: np.ndarray, points: np.ndarray, quad: np.ndarray,

@@ -96,7 +96,9 @@ class Truth:
         Pixel centres follow the mask. The sub-samples of a mixed pixel in or next to the
         mask follow the *surfaces* the mask covers — quads with at least half of their
         (unmixed) pixels painted — so that a target's edge is recolored where the target is,
-        whether or not the artist painted the mixed pixel, as on a real object.
+        whether or not the artist painted the mixed pixel, as on a real object. A quad with no
+        unmixed pixel (under a posed projector nearly every pixel is mixed) counts the pixels
+        whose centre it holds.
         """
         s = self._r.setup
         n = self._r.n_pixels
@@ -108,6 +110,11 @@ class Truth:
             nq = len(self.scene.quads)
             seen = np.bincount(pq[pq >= 0], minlength=nq)
             painted = np.bincount(pq[(pq >= 0) & flat], minlength=nq)
+            centre = np.asarray(s.pixel_quad)[:n]  # the quad at each pixel's centre, mixed or not
+            seen_c = np.bincount(centre[centre >= 0], minlength=nq)
+            painted_c = np.bincount(centre[(centre >= 0) & flat], minlength=nq)
+            painted = np.where(seen > 0, painted, painted_c)
+            seen = np.where(seen > 0, seen, seen_c)
             owned = (seen > 0) & (painted >= 0.5 * seen)
             near = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).ravel() > 0
             vis = s.n_visible

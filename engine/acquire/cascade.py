@@ -106,7 +106,7 @@ class _Plan:
             Emitter(
                 p.correspondence, p.direct, p.mask, calibration.response, settings.per_channel, settings.tau,
                 settings.negative, p.direct_matrix, settings.complete_direct,
-                p.stand_in() if settings.stand_in else None,
+                p.stand_in() if settings.stand_in else None, p.spread, p.edge_direct,
             )
             for p in prepared
         ]
@@ -363,7 +363,7 @@ def acquire_cascade(
         raise InputError('order="auto" captures every observation; '
                          "give adaptive=None or a brute policy with a threshold")
     t_count = len(targets)
-    d_cost = 0 if prepared is not None else t_count * pattern_budget(True)
+    d_cost = 0 if prepared is not None else t_count * pattern_budget(True, spread=settings.spread)
     re_emissions = (k**t_count - 1) * settings.captures_per_step()
     recorder.planned = recorder.count + 1 + (photograph_pattern is not None) + d_cost + re_emissions
     if recorder.noise is None and calibration.noise is not None:
@@ -376,7 +376,8 @@ def acquire_cascade(
                                                                   {"kind": "black"})
     if prepared is None:
         prepared = [
-            prepare_target(recorder, calibration, m, base.image, name=f"{prefix}-{capture_stem(n, m)}")
+            prepare_target(recorder, calibration, m, base.image, name=f"{prefix}-{capture_stem(n, m)}",
+                           spread=settings.spread)
             for n, m in targets
         ]
     plan = _Plan(recorder, calibration, list(prepared), kappas, k, settings, adaptive, photograph, base, prefix,

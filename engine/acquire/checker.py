@@ -81,7 +81,7 @@ def measure_checker(recorder: Recorder, calibration: Calibration, checker: Check
     InputError
         The projector reaches none of the chart, or fewer than 6 patches were measured.
     """
-    prepared = prepare_target(recorder, calibration, checker.mask(), base, name=name)
+    prepared = prepare_target(recorder, calibration, checker.mask(), base, name=name, spread=False)
     patch_direct, _ = sample_patches(prepared.direct, checker, valid=prepared.mask)
     patch_xy, _ = sample_patches(projector_xy(prepared), checker, valid=prepared.mask)
     rho = reference_reflectances() if sensitivities is None else reference_reflectances(sensitivities)

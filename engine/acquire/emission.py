@@ -105,6 +105,17 @@ class Emitter:
         a concave corner is where the target is brightest — and left the edge pixels'
         observations 11 % off the whole target's (ideal supersampled Cornell box, 128²; 0.5 %
         with the extra capture, whose camera noise the larger scale divides).
+    spread : (H, W, 3, 3) float32, optional
+        How each camera pixel's direct light divides among the 3×3 projector pixels round its
+        own (:func:`engine.calibrate.projector_spread`); None: all from its own. The direct
+        light a pattern gives (:meth:`shortfall`) is their weighted mean: a posed projector's
+        pixels straddle the camera's, so a pixel also receives what its neighbours wanted.
+    edge_direct : (H, W, 3) float32, optional
+        D of pixels that are not emitted but that emitted projector pixels light (a soft mask's
+        edge pixels under a posed projector, :attr:`engine.acquire.PreparedTarget.edge_direct`):
+        the direct light each pattern puts there is known and taken out of the capture with the
+        shortfall, so that they hold what Eq. 9 says of a target point left out of the
+        re-emission.
     """
 
     correspondence: Correspondence
@@ -117,6 +128,8 @@ class Emitter:
     direct_matrix: np.ndarray | None = None
     complete_direct: bool = True
     stand_in: np.ndarray | None = None
+    spread: np.ndarray | None = None
+    edge_direct: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 < float(self.tau) <= 1.0:
@@ -169,11 +182,13 @@ class Emitter:
                     short = self._direct(plane * scale, channels) - self._direct(self._lit(proj), channels)
                     if boost is not None and not self.complete_direct:  # the stand-in's extra direct light only
                         short = np.where((boost > 1) & t, short, 0).astype(np.float32)
+                short = self._off_target(proj, channels, short)
                 out.append(self._emission(proj, channels, scale, sign, label + suffix, short))
                 if over is not None and float(over.max()) > OVER_MIN * self.tau:
                     grow = self.tau / float(over.max())  # shown at full range: its capture's noise shrinks by it
                     over = over * grow
                     extra = -self._direct(self._lit(over), channels)  # all of it is the stand-in's direct light
+                    extra = self._off_target(over, channels, extra)
                     out.append(self._emission(over, channels, scale * grow, sign, label + suffix + "-over", extra))
         return out, clamped
 
@@ -183,11 +198,37 @@ class Emitter:
             proj = self.response.linearize(proj)
         return Emission(proj.astype(np.float32), channels, scale, sign, name, short)
 
-    def _lit(self, projector_light: np.ndarray) -> np.ndarray:
-        """(H, W, 3): the linear light each target camera pixel's projector pixel emits (0 elsewhere)."""
-        corr, t = self.correspondence, self.target
+    def _off_target(self, proj: np.ndarray, channels: tuple[int, ...], short):
+        """``short`` minus the direct light pattern ``proj`` puts on :attr:`edge_direct`'s pixels."""
+        if self.edge_direct is None:
+            return short
+        where = (self.edge_direct > 0).any(axis=-1) & self.correspondence.valid & ~self.target
+        lit = self._lit(proj, where)
+        extra = np.zeros(self.target.shape + (3,), np.float32)
+        extra[..., channels] = (self.edge_direct * lit)[..., channels]
+        return -extra if short is None else (short - extra).astype(np.float32)
+
+    def _lit(self, projector_light: np.ndarray, pixels: np.ndarray | None = None) -> np.ndarray:
+        """(H, W, 3): the linear light each target camera pixel (or each of ``pixels``) receives, 0 elsewhere.
+
+        Its own projector pixel's, or with :attr:`spread` the weighted mean of the 3×3 round it.
+        """
+        corr, t = self.correspondence, (self.target if pixels is None else pixels)
         lit = np.zeros(t.shape + (3,), np.float32)
-        lit[t] = projector_light[corr.y[t], corr.x[t]]
+        if self.spread is None:
+            lit[t] = projector_light[corr.y[t], corr.x[t]]
+            return lit
+        hp, wp = projector_light.shape[:2]
+        ys, xs = corr.y[t], corr.x[t]
+        weights = self.spread[t]
+        acc = np.zeros((len(ys), projector_light.shape[2]), np.float64)
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                wgt = weights[:, dy + 1, dx + 1]
+                if not wgt.any():
+                    continue
+                acc += wgt[:, None] * projector_light[np.clip(ys + dy, 0, hp - 1), np.clip(xs + dx, 0, wp - 1)]
+        lit[t] = acc
         return lit
 
     def _direct(self, light: np.ndarray, channels: tuple[int, ...]) -> np.ndarray:

@@ -50,6 +50,12 @@ class CaptureSettings:
         projector cannot reach) also emit the light of the target part there, which cannot be
         re-emitted (:func:`engine.edge.stand_in`, :attr:`PreparedTarget.stand_in`). False only
         to measure what it is worth (the behaviour before it existed).
+    spread : bool
+        Measure how the target's pixels straddle projector pixels and the direct light the
+        emitted pixels put on a soft mask's edge pixels, and complete each re-emission's direct
+        light with both (:func:`engine.calibrate.projector_spread`, 8 more captures a target):
+        what a posed projector needs. False only to measure what it is worth (the behaviour
+        before it existed).
     """
 
     per_channel: bool = True
@@ -58,12 +64,13 @@ class CaptureSettings:
     negative: str = Negative.SPLIT
     complete_direct: bool = True
     stand_in: bool = True
+    spread: bool = True
 
     def to_dict(self) -> dict:
         """JSON form, stored in the session (the switches that are on by default only when off)."""
         out = {"per_channel": self.per_channel, "differences": self.differences, "tau": self.tau,
                "negative": str(self.negative)}
-        for name in ("complete_direct", "stand_in"):
+        for name in ("complete_direct", "stand_in", "spread"):
             if not getattr(self, name):
                 out[name] = False
         return out
@@ -73,7 +80,7 @@ class CaptureSettings:
         """The settings :meth:`to_dict` stored."""
         return cls(per_channel=values["per_channel"], differences=values["differences"], tau=values["tau"],
                    negative=values["negative"], complete_direct=values.get("complete_direct", True),
-                   stand_in=values.get("stand_in", True))
+                   stand_in=values.get("stand_in", True), spread=values.get("spread", True))
 
     def captures_per_step(self) -> int:
         """Captures one re-emission costs at most, but for a soft mask's stand-in: where its raised

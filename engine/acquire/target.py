@@ -30,7 +30,10 @@ from engine.calibrate import (
     fill_correspondence,
     high_frequency_patterns,
     projector_footprint,
+    projector_spread,
+    spread_patterns,
 )
+from engine.calibrate.warp import SPREAD_CAPTURES
 from engine.checks import check_mask
 from engine.decompose import Decomposition, decompose
 from engine.edge import blend_edges, check_coverage, is_soft
@@ -38,6 +41,12 @@ from engine.edge import stand_in as stand_in_weights
 from engine.errors import InputError
 from engine.fill import fill_unreachable
 from engine.trust import TrustedDecomposition, each_order, prepare_trust
+
+#: An edge pixel's measured D counts when it is at least this fraction of its brightest solid
+#: neighbour's: the high-frequency patterns' global light alone gives up to 12 % next to a concave
+#: corner, where a co-axial projector puts no direct light on the edge pixels (ideal supersampled
+#: Cornell box, 48²); a posed projector's light on them is 15–65 % there.
+EDGE_DIRECT_FLOOR = 0.15
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +75,14 @@ class PreparedTarget:
     coverage : (H, W) float32 or None
         The soft mask the target was painted with (None: a hard mask). Its solid pixels are
         ``mask | unreachable``; its edge pixels (0 < coverage < 1) are blended when decomposing.
+    spread : (H, W, 3, 3) float32 or None
+        How each emitted pixel's direct light divides among the projector pixels round its own
+        (:func:`engine.calibrate.projector_spread`, renormalised over the projector pixels D
+        was measured with): what the emission's direct light is completed with. Edge pixels too.
+    edge_direct : (H, W, 3) float32 or None
+        D of a soft mask's edge pixels (their target strip, lit by the emitted projector pixels
+        alone): a posed projector's emitted pixels also light the strip, and that direct light,
+        which Eq. 9 at an edge pixel does not hold, is taken out of every re-emission.
     """
 
     mask: np.ndarray
@@ -76,6 +93,8 @@ class PreparedTarget:
     direct_matrix: np.ndarray | None = None
     direct_variance: np.ndarray | None = None
     coverage: np.ndarray | None = None
+    spread: np.ndarray | None = None
+    edge_direct: np.ndarray | None = None
 
     def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3,
                   edge_radius: int = 1, covariance=None, constraint: str = "ordered") -> Decomposition:
@@ -157,6 +176,7 @@ def prepare_target(
     floor: float = 0.02,
     consistency: float = 0.7,
     margin: int = 0,
+    spread: bool = True,
 ) -> PreparedTarget:
     """Measure D on a painted target and drop the pixels the projector cannot re-emit.
 
@@ -191,6 +211,12 @@ def prepare_target(
         emitted either (the projector footprint must be wholly on the target: use the
         projector's blur radius when it is defocused). Edge pixels the Gray code could not
         decode claim no projector pixel.
+    spread : bool
+        Also measure how the target's camera pixels straddle projector pixels (8 more captures,
+        :func:`engine.calibrate.spread_patterns`): :attr:`PreparedTarget.spread`, and a soft
+        mask's edge pixels' D (:attr:`PreparedTarget.edge_direct`), which complete each
+        re-emission's direct light where a posed projector's pixels do not line up with the
+        camera's. False when only D is wanted (or to measure what they are worth).
 
     Returns
     -------
@@ -222,13 +248,19 @@ def prepare_target(
     footprint = projector_footprint(corr, target=painted_valid)
     patterns = high_frequency_patterns(calibration.projector_resolution, mask_projector=footprint, period=period,
                                        shifts=shifts)
-    lit_full, unlit_full = _neighbourhood_states(patterns, corr, painted_valid, footprint)
+    # a soft mask's edge pixels are measured too (not emitted): the light a posed projector's
+    # emitted pixels put on their target strip is taken out of each re-emission (Emitter.shortfall)
+    edge_px = np.zeros_like(target)
+    if coverage is not None and spread:
+        corr, edge_px = _edge_decodes(corr, target, coverage > 0)
+    measured = painted_valid | edge_px
+    lit_full, unlit_full = _neighbourhood_states(patterns, corr, measured, footprint)
     groups = [(c,) for c in range(3)] if per_channel else [(0, 1, 2)]
     # matrix[..., c, g]: camera channel c's direct light per unit of primary group g
     matrix = np.zeros(base.shape + (len(groups),), np.float32)
     n_plus = lit_full.sum(axis=0)[:, :, None]
     n_minus = unlit_full.sum(axis=0)[:, :, None]
-    ok = painted_valid[:, :, None] & (n_plus > 0) & (n_minus > 0)
+    ok = measured[:, :, None] & (n_plus > 0) & (n_minus > 0)
     brightest = np.full(base.shape, -np.inf)  # correspondence-free max - min, to check it
     darkest = np.full(base.shape, np.inf)
     variance = np.zeros(base.shape, np.float64)  # of D: lit and unlit means, base cancels
@@ -275,11 +307,54 @@ def prepare_target(
     usable = painted_valid & consistent & strong
     if not usable.any():
         raise InputError("the projector's direct light on the target is too weak to measure everywhere on it")
+    edge_direct = None
+    if edge_px.any():  # D of the edge pixels' target strip, where it passes its noise and the patterns' bias
+        import cv2
+
+        sigma = np.sqrt(variance) if known else 0.0
+        solid_d = np.where(usable[:, :, None], direct, 0).astype(np.float32)
+        brightest = cv2.dilate(solid_d, np.ones((3, 3), np.uint8))
+        real = (direct > 2 * sigma) & (direct > EDGE_DIRECT_FLOOR * brightest)
+        edge_direct = np.where(edge_px[:, :, None] & real, direct, 0).astype(np.float32)
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     direct_matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
     direct_variance = np.where(usable[:, :, None], variance, 0).astype(np.float32) if known else None
+    weights = None
+    if spread:
+        lit_direct = direct if edge_direct is None else direct + edge_direct
+        weights = _measure_spread(recorder, calibration, corr, usable | edge_px, lit_direct, footprint, base, name)
     return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), direct_matrix,
-                          direct_variance, coverage)
+                          direct_variance, coverage, weights, edge_direct)
+
+
+def _edge_decodes(corr: Correspondence, target: np.ndarray, painted: np.ndarray) -> tuple[Correspondence, np.ndarray]:
+    """The correspondence with the edge pixels' (``painted & ~target``) decodes repaired, and those decoded.
+
+    A mixed pixel often does not decode (under a posed projector its stripes are mixed too): it
+    gets the target's local plane (:func:`engine.calibrate.fill_correspondence`). Only the edge
+    pixels change; they are measured, never emitted. (The unpainted pixels next to the target
+    are not measured: at a concave corner the patterns' global light there passes any floor
+    that keeps a posed projector's spill.)
+    """
+    edge_px = painted & ~target
+    filled, _ = fill_correspondence(corr, painted)
+    x = np.where(edge_px, filled.x, corr.x).astype(np.int32)
+    y = np.where(edge_px, filled.y, corr.y).astype(np.int32)
+    status = np.where(edge_px, filled.status, corr.status).astype(corr.status.dtype)
+    out = Correspondence(x, y, status, corr.projector_resolution)
+    return out, edge_px & out.valid
+
+
+def _measure_spread(recorder: Recorder, calibration: Calibration, corr: Correspondence, usable, direct, footprint,
+                    base, name: str) -> np.ndarray:
+    """Capture :func:`engine.calibrate.spread_patterns` and read :func:`engine.calibrate.projector_spread`."""
+    lights, variances = [], []
+    for i, pattern in enumerate(spread_patterns(footprint)):
+        shown = pattern if calibration.response is None else calibration.response.linearize(pattern)
+        lights.append(recorder.capture(f"{name}-spread-{i}", shown, meta={"kind": "spread"}) - base)
+        variances.append(recorder.last_variance)
+    known = all(v is not None for v in variances)
+    return projector_spread(corr, usable, direct, lights, footprint=footprint, variance=variances if known else None)
 
 
 def _drop_shared(corr: Correspondence, target: np.ndarray, margin: int) -> Correspondence:
@@ -365,9 +440,9 @@ def _neighbourhood_states(
     return lit, unlit
 
 
-def pattern_budget(per_channel: bool, *, shifts: int = 2) -> int:
-    """Number of captures :func:`prepare_target` takes."""
-    return (3 if per_channel else 1) * 2 * shifts * shifts
+def pattern_budget(per_channel: bool, *, shifts: int = 2, spread: bool = False) -> int:
+    """Number of captures :func:`prepare_target` takes (``spread``: with its spread captures)."""
+    return (3 if per_channel else 1) * 2 * shifts * shifts + (SPREAD_CAPTURES if spread else 0)
 
 
 def _spread(total: np.ndarray, squares: np.ndarray, count: np.ndarray) -> np.ndarray:

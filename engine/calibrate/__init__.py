@@ -11,7 +11,7 @@ decoding also takes uint8/uint16 and grey images).
 - :mod:`~engine.calibrate.graycode`: :func:`gray_code_patterns`, :func:`decode_gray_code`
   → :class:`Correspondence`.
 - :mod:`~engine.calibrate.warp`: :func:`warp_to_projector`, :func:`warp_to_camera`,
-  :func:`projector_to_camera_map`, :func:`projector_footprint`.
+  :func:`projector_to_camera_map`, :func:`projector_footprint`, :func:`spread_patterns` → :func:`projector_spread`.
 - :mod:`~engine.calibrate.direct`: :func:`high_frequency_patterns`, :func:`direct_image`
   → :class:`DirectImage` (the paper's D, Sec. 3.3).
 - :mod:`~engine.calibrate.crosstalk`: :func:`crosstalk_patterns`, :func:`fit_crosstalk`
@@ -43,7 +43,9 @@ from engine.calibrate.warp import (
     ProjectorMap,
     estimate_hole_radius,
     projector_footprint,
+    projector_spread,
     projector_to_camera_map,
+    spread_patterns,
     warp_to_camera,
     warp_to_projector,
 )
@@ -74,10 +76,12 @@ __all__ = [
     "gray_code_patterns",
     "high_frequency_patterns",
     "projector_footprint",
+    "projector_spread",
     "projector_lit",
     "projector_to_camera_map",
     "ramp_levels",
     "response_patterns",
+    "spread_patterns",
     "warp_to_camera",
     "warp_to_projector",
 ]

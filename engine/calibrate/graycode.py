@@ -535,7 +535,7 @@ def _pair(pos: np.ndarray, neg: np.ndarray, thr, bit: np.ndarray, ok: np.ndarray
 
 
 def fill_correspondence(
-    correspondence: Correspondence, target, *, radius: int = 4, tolerance: float = 2.0
+    correspondence: Correspondence, target, *, radius: int = 4, tolerance: float = 2.0, passes: int = 3
 ) -> tuple[Correspondence, np.ndarray]:
     """Repair a target's correspondences: drop outliers, fill holes from local plane fits.
 
@@ -557,6 +557,10 @@ def fill_correspondence(
     tolerance : float
         Largest accepted distance, in projector pixels, between a decoded position and its
         neighbours' plane.
+    passes : int
+        Filled pixels count as neighbours in the next pass: a hole wider than the window fills
+        from its rim inwards (under a posed projector most camera pixels straddle two projector
+        pixels, and those split near half and half do not decode: whole patches of them).
 
     Returns
     -------
@@ -587,13 +591,20 @@ def fill_correspondence(
     px, py, ok = _plane_fit(good, (x, y), radius, leave_one_out=True)
     outlier = good & ok & (np.hypot(px - x, py - y) > tolerance)
     good &= ~outlier
-    holes = target & ~good
-    px, py, ok = _plane_fit(good, (x, y), radius, leave_one_out=False)
     hp, wp = correspondence.projector_resolution
-    fx, fy = np.rint(px), np.rint(py)
-    fill = holes & ok & (fx >= 0) & (fx < wp) & (fy >= 0) & (fy < hp)
-    out_x = np.where(fill, fx, correspondence.x).astype(np.int32)
-    out_y = np.where(fill, fy, correspondence.y).astype(np.int32)
+    fill = np.zeros_like(target)
+    out_x, out_y = correspondence.x.astype(np.int32), correspondence.y.astype(np.int32)
+    for _ in range(int(passes)):  # a wide hole fills from its rim inwards
+        px, py, ok = _plane_fit(good, (x, y), radius, leave_one_out=False)
+        fx, fy = np.rint(px), np.rint(py)
+        new = target & ~good & ok & (fx >= 0) & (fx < wp) & (fy >= 0) & (fy < hp)
+        if not new.any():
+            break
+        out_x = np.where(new, fx, out_x).astype(np.int32)
+        out_y = np.where(new, fy, out_y).astype(np.int32)
+        x, y = np.where(new, fx, x), np.where(new, fy, y)
+        fill |= new
+        good |= new
     status = correspondence.status.copy()
     status[outlier] = PixelStatus.LOW_CONTRAST
     status[fill] = PixelStatus.DECODED

@@ -76,7 +76,7 @@ _SETTINGS = Obj(required={
     "differences": Bool(),
     "tau": Num(0, 1, positive=True),
     "negative": Str(choices=("clamp", "split")),
-}, optional={"complete_direct": Bool(), "stand_in": Bool()})
+}, optional={"complete_direct": Bool(), "stand_in": Bool(), "spread": Bool()})
 
 _ADAPTIVE = Obj(required={
     "policy": Str(choices=("brute", "linear", "span")),

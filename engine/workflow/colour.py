@@ -165,7 +165,8 @@ def target_direct(session: Session, mask) -> np.ndarray | None:
     name = plan["targets"][plan["masks"].index(digest)]
     base = session.read_capture(f"{_ACQUISITION}-black" if plan["photograph_pattern"] else f"{_ACQUISITION}-photograph")
     recorder = Recorder(_OfflineRig.of(session), session)
-    direct = prepare_target(recorder, load_calibration(session), mask, base, name=f"{_ACQUISITION}-{name}").direct
+    direct = prepare_target(recorder, load_calibration(session), mask, base, name=f"{_ACQUISITION}-{name}",
+                            spread=False).direct
     try:
         session.write_array(COLOUR_GROUP, direct_array(digest), direct)
     except (OSError, SessionError):

@@ -83,7 +83,7 @@ def _expected_captures(order: int, targets: int = 1) -> int:
     this is an upper bound.
     """
     later = order**targets - 2
-    return 1 + targets * pattern_budget(True) + 3 + max(later, 0) * CaptureSettings().captures_per_step()
+    return 1 + targets * pattern_budget(True, spread=True) + 3 + max(later, 0) * CaptureSettings().captures_per_step()
 
 
 def _acq(session) -> dict[str, str]:
