@@ -6,7 +6,8 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
 * ``cornell`` — path-traced Cornell box (``mitsuba:cornell``), the right wall painted as the
   rig's hard mask (pixels at least half wall), order 4: error over the wall *with* its edge
   pixels against its interior, for κ = (0.5, 1.2, 0.8) and the paper's (2, 0.125, 8) with
-  noise reduction, and the whole image against the render's own noise floor (two
+  noise reduction (before the edge blend; beside it the previous order, the blended
+  decomposition filtered), and the whole image against the render's own noise floor (two
   independent truth renders). "soft" refines the hard mask from the photograph
   (:func:`engine.edge.refine_mask`); "soft (true coverage)" uses the rig's exact coverage.
 * ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4), the true
@@ -101,9 +102,12 @@ class Experiment:
         return next(iter(self._acq.values())).observations[0]
 
 
-def _decomposition(acq, denoise):
-    d = acq.target.decompose(acq.observations)
-    return denoise_components(d, acq.observations[0], radius=denoise) if denoise else d
+def _decomposition(acq, denoise, *, after=False):
+    """The acquisition's decomposition, noise-reduced with radius ``denoise`` (0: off) before the edge blend;
+    ``after``: the previous behaviour, the blended decomposition filtered."""
+    if after and denoise:
+        return denoise_components(acq.target.decompose(acq.observations), acq.observations[0], radius=denoise)
+    return acq.target.decompose(acq.observations, denoise=denoise)
 
 
 def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_truth=True):
@@ -120,8 +124,10 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
         denoise = denoise_for(kappa)
         naive = np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo)
         results = [("naive per-pixel", naive)]
-        for label, name in variants:
-            results.append((label, recolor(_decomposition(exp._acq[name], denoise), kappa)))
+        for label, name, *after in variants:  # ("label", "acquisition"[, "after": filter the blended one])
+            if after and not denoise:
+                continue
+            results.append((label, recolor(_decomposition(exp._acq[name], denoise, after=bool(after)), kappa)))
         for label, img in results:
             e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
             rows.append(
@@ -165,13 +171,14 @@ def part_cornell(args):
     exp.acquire("soft", soft)
     err = np.abs(soft - exp.coverage)[(exp.coverage > 0) & (exp.coverage < 1)]
     print(f"refined coverage vs true coverage on edge pixels: mean |error| {err.mean():.3f}")
-    variants = [("previous (hard mask)", "hard"), ("soft mask, refined", "soft")]
+    variants = [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"),
+                ("soft refined, filtered after blend", "soft", "after")]
     lamp = rig.truth.emitters()
     edge_table(exp, variants, [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     if not args.quick:
         exp.acquire("true", exp.coverage)
-        edge_table(exp, [("soft mask, true coverage", "true")], [K1, K2],
-                   denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
+        edge_table(exp, [("soft mask, true coverage", "true"), ("soft true, filtered after blend", "true", "after")],
+                   [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     rig.close()
 
 

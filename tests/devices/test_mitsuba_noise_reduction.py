@@ -1,0 +1,41 @@
+"""Noise reduction of a soft mask on the path-traced rig: the filter runs before the edge blend.
+
+The blend extrapolates each edge pixel's target part from two target pixels and packs it with
+the neighbour's part into one set of components; filtering the blended decomposition mixes
+those with the outside pixels' own and made the edge worse than no noise reduction at all.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import devices
+from engine.acquire import Recorder, acquire_single, calibrate_rig
+from engine.acquire.predict import relative_error
+from engine.denoise import denoise_components
+from engine.recolor import recolor
+
+pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
+
+KAPPA = np.array([2.0, 0.125, 8.0])
+
+
+def test_noise_reduction_before_the_edge_blend_keeps_the_edge(tmp_path):
+    with devices.open_rig("mitsuba:cornell", ideal=True, resolution=(32, 32), spp=64, ambient_spp=256,
+                          truth_spp=1024, coverage_passes=64, cache_dir=tmp_path, seed=3) as rig:
+        rec = Recorder(rig, None)
+        cal = calibrate_rig(rec, rig_name=rig.identity)
+        cov, hard = rig.coverage["right_wall"], rig.targets["right_wall"]
+        acq = acquire_single(rec, cal, cov, 4)
+        truth = rig.truth.recolor([(hard, KAPPA)])
+    edge = (cov > 0) & (cov < 1)
+    obs = acq.observations
+    errors = {
+        "off": relative_error(recolor(acq.target.decompose(obs), KAPPA), truth, edge),
+        "before": relative_error(recolor(acq.target.decompose(obs, denoise=2), KAPPA), truth, edge),
+        "after": relative_error(recolor(denoise_components(acq.target.decompose(obs), obs[0], radius=2), KAPPA),
+                                truth, edge),
+    }
+    # measured (seed 3): 17.9 % without noise reduction, 14.4 % filtered before the blend, 36.3 % after it
+    assert errors["before"] < 0.9 * errors["off"] and errors["before"] < 0.5 * errors["after"], errors
