@@ -1,4 +1,5 @@
-"""Noise reduction of a soft mask on the path-traced rig: the filter runs before the edge blend.
+"""Noise on the path-traced rig: each frame's Monte Carlo variance, and noise reduction of a soft mask
+(the filter runs before the edge blend).
 
 The blend extrapolates each edge pixel's target part from two target pixels and packs it with
 the neighbour's part into one set of components; filtering the blended decomposition mixes
@@ -39,3 +40,25 @@ def test_noise_reduction_before_the_edge_blend_keeps_the_edge(tmp_path):
     }
     # measured (seed 3): 17.9 % without noise reduction, 14.4 % filtered before the blend, 36.3 % after it
     assert errors["before"] < 0.9 * errors["off"] and errors["before"] < 0.5 * errors["after"], errors
+
+
+def test_frames_carry_their_monte_carlo_variance_and_acquisition_adds_it(tmp_path):
+    frames, variances = [], []
+    with devices.open_rig("mitsuba:cornell", ideal=True, resolution=(16, 16), spp=16, ambient_spp=64,
+                          coverage_passes=16, cache_dir=tmp_path, seed=5) as rig:
+        rec = Recorder(rig, None)
+        white = np.ones(rig.projector.resolution + (3,), np.float32)
+        for i in range(12):
+            frame = rig.camera.capture() if i % 2 else None
+            if frame is None:  # every other frame through the recorder, which adds the camera model's (ideal: ~0)
+                frames.append(rec.capture(f"white-{i}", white))
+                variances.append(rec.last_variance)
+                continue
+            frames.append(frame.image)
+            variances.append(frame.variance)
+    stack = np.stack(frames).astype(np.float64)
+    measured = stack.var(axis=0, ddof=1)  # the spread of twelve independent renders
+    reported = np.mean(variances, axis=0)
+    lit = stack.mean(axis=0) > 0
+    ratio = reported[lit].sum() / measured[lit].sum()
+    assert 0.8 < ratio < 1.25, ratio  # measured (seed 5): 1.01
