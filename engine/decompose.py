@@ -50,6 +50,11 @@ class Decomposition:
         ``L̄_d, C R^0 L_d … C R^{K-2} L_d`` (``C R^0 … C R^{K-1}`` without unreached light).
         None when the observations' noise was not given. Standard deviations:
         :meth:`standard_deviation`.
+    blended : (H, W) bool or None
+        Non-target pixels that :func:`engine.edge.blend_edges` re-packed as a mix of a soft
+        mask's target part and its neighbour's (index i holds the target's ``R^{i-1} L_d``
+        and the neighbour's ``C R^i L_d`` together): a filter across pixels must leave them
+        out (:func:`engine.denoise.denoise_components`). None: no such pixel.
     """
 
     components: np.ndarray
@@ -59,6 +64,7 @@ class Decomposition:
     unreached_light: bool = True
     residual: np.ndarray | None = None
     covariance: np.ndarray | None = None
+    blended: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         comps, unreached, target = self.components, self.unreached, self.target
@@ -74,6 +80,9 @@ class Decomposition:
             raise InputError(f"target must be a bool array of shape {(h, w)}, got {_describe(target)}")
         if self.residual is not None and (not isinstance(self.residual, np.ndarray) or self.residual.shape != (h, w)):
             raise InputError(f"residual must be None or an array of shape {(h, w)}, got {_describe(self.residual)}")
+        if self.blended is not None and (not isinstance(self.blended, np.ndarray) or self.blended.dtype != bool
+                                         or self.blended.shape != (h, w)):
+            raise InputError(f"blended must be None or a bool array of shape {(h, w)}, got {_describe(self.blended)}")
         check_choice("constraint", self.constraint, Constraint)
         if not isinstance(self.unreached_light, (bool, np.bool_)):
             raise InputError(f"unreached_light must be True or False, got {self.unreached_light!r}")
@@ -84,7 +93,8 @@ class Decomposition:
         Returns
         -------
         dict
-            ``components``, ``unreached``, ``target``, ``residual`` and ``covariance`` (when there are),
+            ``components``, ``unreached``, ``target``, ``residual``, ``covariance`` and ``blended``
+            (when there are),
             ``flags`` ``(1,) bool`` (``unreached_light``) and ``constraint`` ``(16,) uint8``
             (the mode's name, space-padded). :meth:`from_arrays` reads it back.
 
@@ -107,6 +117,8 @@ class Decomposition:
             arrays["residual"] = self.residual
         if self.covariance is not None:
             arrays["covariance"] = self.covariance
+        if self.blended is not None:
+            arrays["blended"] = self.blended
         return arrays
 
     @classmethod
@@ -130,7 +142,8 @@ class Decomposition:
             raise InputError("the arrays' constraint is not a mode name; not a decomposition") from None
         d = cls(np.asarray(arrays["components"]), np.asarray(arrays["unreached"]), np.asarray(arrays["target"]),
                 constraint, bool(flags[0]), None if "residual" not in arrays else np.asarray(arrays["residual"]),
-                None if "covariance" not in arrays else np.asarray(arrays["covariance"]))
+                None if "covariance" not in arrays else np.asarray(arrays["covariance"]),
+                None if "blended" not in arrays else np.asarray(arrays["blended"]))
         check_float_image("components", d.components, ndim=4)
         check_float_image("unreached", d.unreached, ndim=3)
         if d.covariance is not None:
@@ -176,8 +189,9 @@ class Decomposition:
         rows, cols = slice(y0, y1), slice(x0, x1)
         residual = None if self.residual is None else self.residual[rows, cols]
         cov = None if self.covariance is None else self.covariance[:, rows, cols]
+        blended = None if self.blended is None else self.blended[rows, cols]
         return Decomposition(self.components[:, rows, cols], self.unreached[rows, cols], self.target[rows, cols],
-                             self.constraint, self.unreached_light, residual, cov)
+                             self.constraint, self.unreached_light, residual, cov, blended)
 
     def standard_deviation(self) -> tuple[np.ndarray, np.ndarray]:
         """Standard deviation of every component and of the unreached light.

@@ -255,7 +255,8 @@ def blend_edges(
     -------
     decomposition : Decomposition
         Edge pixels re-packed so that recoloring scales their target part as target
-        (Eq. 3) and their neighbour's part as non-target (Eq. 4); ``target`` unchanged.
+        (Eq. 3) and their neighbour's part as non-target (Eq. 4), and marked in its
+        ``blended``; ``target`` unchanged.
     blended : (H, W) bool
         The edge pixels changed (those with solid and outside pixels in their window).
 
@@ -390,6 +391,7 @@ def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Dec
         decomposition.unreached_light,
         residual,
         decomposition.covariance,  # an edge pixel keeps its unknowns' variance: its light is only re-divided
+        blended if decomposition.blended is None else decomposition.blended | blended,
     ), blended
 
 

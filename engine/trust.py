@@ -15,12 +15,13 @@ better estimate possible.
 
 :func:`prepare_trust` smooths every share of every order's decomposition with the box radius
 that minimises its locally averaged SURE (Stein's unbiased estimate of the mean squared
-error, bias included), on and off the target separately. :func:`recolor_trusted` writes the
-recolored pixel as ``I (a + Σ_j β_j s̃_j)`` for candidate orders — the measured shares below
-J, the rest extrapolated with ρ — and, per region and channel, keeps going to the next
-candidate (a measured share more, then a decomposition of higher order) only while the
-squared bias it removes exceeds the variance it adds, both estimated from the data. The
-result carries its predicted standard deviation. κ = 1 returns the photograph exactly.
+error, bias included), on and off the target separately (a soft mask's blended edge pixels
+on their own). :func:`recolor_trusted` writes the recolored pixel as ``I (a + Σ_j β_j s̃_j)``
+for candidate orders — the measured shares below J, the rest extrapolated with ρ — and, per
+region and channel, keeps going to the next candidate (a measured share more, then a
+decomposition of higher order) only while the squared bias it removes exceeds the variance
+it adds, both estimated from the data. The result carries its predicted standard deviation.
+κ = 1 returns the photograph exactly.
 """
 
 from __future__ import annotations
@@ -469,7 +470,7 @@ def recolor_noise_aware(observations, target, covariance, kappa, *, unreached_li
 
 # --- helpers -----------------------------------------------------------------------------------
 def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
-    """Smooth one decomposition's shares in each region and channel.
+    """Smooth one decomposition's shares in each region (target, elsewhere, blended edge pixels) and channel.
 
     Works one channel at a time from the packed float32 covariance (float64 planes of one
     channel, not the whole unpacked covariance): bench/trusted.py measures its time and peak
@@ -482,6 +483,9 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
     shares = np.zeros((n, h, w, c), np.float32)
     share_cov = np.zeros((n * (n + 1) // 2, h, w, c), np.float32)
     photo_share = np.zeros((n, h, w, c), np.float32)
+    # a soft mask's blended edge pixels pack two surfaces' parts in other slots than the neighbour's pixels:
+    # their shares are smoothed among themselves only, and never read by the neighbour's
+    regions = [d.target, ~d.target] if d.blended is None else [d.target, ~d.target & ~d.blended, d.blended & ~d.target]
     for ch in range(c):
         def cov(a: int, b: int, ch=ch) -> np.ndarray:
             return packed[packed_index(a, b, k), ..., ch].astype(np.float64)
@@ -495,7 +499,7 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
                 entry = cov(a, b)
                 photo_var += entry
                 photo_cov[b] += entry
-        for region in (d.target, ~d.target):
+        for region in regions:
             if not region.any():
                 continue
             checkpoint(should_stop, "noise-aware recoloring")

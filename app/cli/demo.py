@@ -37,6 +37,7 @@ from app.model.files import export_image, open_document, prepare_trusted, recolo
 from app.model.noise import SKIP_BELOW, denoise_radius
 from engine.acquire import Adaptive
 from engine.acquire.predict import relative_error
+from engine.colour import convergence
 from engine.errors import InputError
 from engine.imageio import to_display, write_image
 from engine.recolor import recolor
@@ -65,7 +66,8 @@ def add_arguments(parser) -> None:
                         help="rig with ground truth to run on instead: virtual:SCENE or mitsuba:SCENE (path-traced)")
     parser.add_argument("--spp", type=int, default=256,
                         help="mitsuba rig: samples per pixel of each capture's render (default %(default)s)")
-    parser.add_argument("--target", default=DEMO_TARGET, help="scene target to recolor (default %(default)s)")
+    parser.add_argument("--target", help=f"scene target to recolor (default {DEMO_TARGET}, or the scene's first "
+                                          "target when it has none)")
     parser.add_argument("--kappa", type=kappa, default=np.array(DEMO_KAPPA), metavar="R,G,B",
                         help="albedo scale (default 2,0.125,8: the paper's Fig. 6)")
     parser.add_argument("--order", type=order, default=DEMO_ORDER, help="decomposition order K (default %(default)s)")
@@ -126,9 +128,10 @@ def run(args) -> int:
         options.update(spp=args.spp, progress=ProgressBar())
     t0 = time.monotonic()
     with devices.open_rig(name, **options) as rig:
-        if args.target not in rig.targets:
-            raise InputError(f"scene {scene!r} has no target {args.target!r}; it has {sorted(rig.targets)}")
-        mask = rig.targets[args.target]
+        target = args.target or (DEMO_TARGET if DEMO_TARGET in rig.targets else sorted(rig.targets)[0])
+        if target not in rig.targets:
+            raise InputError(f"scene {scene!r} has no target {target!r}; it has {sorted(rig.targets)}")
+        mask = rig.targets[target]
         if (session_path / "manifest.json").exists():
             session = Session.open(session_path)
             session.recover_orphans()
@@ -140,12 +143,12 @@ def run(args) -> int:
         kind = ("ideal" if args.ideal else "realistic") + (" path-traced" if path_traced else "")
         print(f"calibrating {rig.name} ({kind}, {args.projector}) ...", file=sys.stderr)
         run_calibration(rig, session, progress=ProgressBar())
-        print(f"capturing target {args.target!r} at order {args.order}, {frames} frame(s) per capture ...",
+        print(f"capturing target {target!r} at order {args.order}, {frames} frame(s) per capture ...",
               file=sys.stderr)
         refine = args.edge == "refine" or (args.edge == "auto" and (path_traced or not args.ideal))
         painted = refined_target(rig, session, mask, frames=frames) if refine else mask
         result = run_capture(
-            rig, session, [(args.target, painted)], args.order,
+            rig, session, [(target, painted)], args.order,
             adaptive=None if args.adaptive == "brute" else Adaptive(args.adaptive),
             frames=frames,
             progress=ProgressBar(),
@@ -155,6 +158,9 @@ def run(args) -> int:
         surfaces = ~rig.truth.emitters()  # the lamp dwarfs every surface: score without it
     d = result.decomposition
     raw = recolor(d, args.kappa)
+    unconverged = convergence(d, args.kappa).message()  # as `albedit recolor` and the app warn
+    if unconverged:
+        print(f"albedit demo: warning: {unconverged}", file=sys.stderr)
     size, noise = denoise_radius(d)
     if args.denoise != "auto":
         size = int(args.denoise)

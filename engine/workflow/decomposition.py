@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
-DECOMPOSITION_VERSION = 2
+DECOMPOSITION_VERSION = 3  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out)
 
 
 def decomposition_key(session: Session) -> str:

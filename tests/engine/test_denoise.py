@@ -86,3 +86,22 @@ def test_small_target_is_filtered_in_its_window_exactly_as_in_the_whole_image():
     out_big = denoise_components(big, pad(photo, (0, 1)), radius=3)
     np.testing.assert_allclose(out_big.components[:, 8:-8, 8:-8][:, small], out.components[:, small],
                                rtol=1e-5, atol=1e-6)
+
+
+def test_blended_edge_pixels_are_neither_filtered_nor_read():
+    """A soft mask's blended edge pixels pack two surfaces' parts in other slots than their neighbours'."""
+    from dataclasses import replace
+
+    truth, noisy, photo = _scene(2)
+    edge = np.zeros(noisy.target.shape, bool)
+    edge[:, 38] = True  # the column beside the target (columns 39.. here)
+    assert not (edge & noisy.target).any()
+    spiked = noisy.components.copy()
+    spiked[:, edge] *= 50.0  # packed otherwise: nothing like the neighbour's components
+    d = replace(noisy, components=spiked, blended=edge)
+    out = denoise_components(d, photo)
+    np.testing.assert_array_equal(out.components[:, edge], spiked[:, edge])
+    np.testing.assert_array_equal(out.unreached[edge], d.unreached[edge])
+    np.testing.assert_array_equal(out.blended, edge)
+    clean = denoise_components(replace(noisy, blended=edge), photo)  # the spikes never leak into other pixels
+    np.testing.assert_allclose(out.components[:, ~edge], clean.components[:, ~edge], rtol=1e-5, atol=1e-6)

@@ -185,6 +185,11 @@ def test_a_decomposition_round_trips_through_plain_arrays():
     for name in ("components", "unreached", "target", "residual"):
         np.testing.assert_array_equal(getattr(back, name), getattr(d, name))
     assert (back.constraint, back.unreached_light) == ("nonnegative", False)
+    assert back.blended is None
+    edge = np.zeros((4, 5), bool)
+    edge[0, 1] = True  # a soft mask's blended edge pixel: kept, so that noise reduction of a reloaded one leaves it
+    from dataclasses import replace
+    np.testing.assert_array_equal(Decomposition.from_arrays(replace(d, blended=edge).to_arrays()).blended, edge)
 
 
 @pytest.mark.parametrize(

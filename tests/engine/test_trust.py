@@ -185,3 +185,25 @@ def test_orders_given_one_at_a_time_are_prepared_alike_and_must_increase(noisy_c
         np.testing.assert_array_equal(lazy.to_arrays()[name], value, err_msg=name)
     with pytest.raises(InputError, match="increasing orders"):
         prepare_trust(reversed(decompose_orders(acq.observations, target, acq.covariance)), photo)
+
+
+def test_blended_edge_pixels_are_smoothed_apart_from_the_neighbours_pixels(noisy_cornell):
+    """A soft mask's blended edge pixels pack their parts in other slots than their neighbours:
+    their shares must not leak into the neighbour's smoothed shares (nor the other way)."""
+    from dataclasses import replace
+
+    import cv2
+
+    acq, _, _ = noisy_cornell
+    target, photo = acq.target.mask, acq.observations[0]
+    d = decompose_orders(acq.observations, target, acq.covariance)[-1]
+    ring = (cv2.dilate(target.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & ~target  # beside the target
+    spiked = d.components.copy()
+    spiked[1:, ring] *= 3.0  # other shares there, as a blend packs them
+    base = prepare_trust([replace(d, blended=ring)], photo).levels[0].shares
+    moved = prepare_trust([replace(d, components=spiked, blended=ring)], photo).levels[0].shares
+    others = ~ring
+    np.testing.assert_array_equal(moved[:, others], base[:, others])
+    assert not np.array_equal(moved[:, ring], base[:, ring])
+    mixed = prepare_trust([replace(d, components=spiked)], photo).levels[0].shares  # as before: read by the neighbour
+    assert not np.array_equal(mixed[:, others & ~target], base[:, others & ~target])

@@ -56,6 +56,20 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     np.testing.assert_allclose(read_image(tmp_path / "export.tif"), read_image(out / "recolored.exr"), rtol=1e-6)
 
 
+def test_demo_on_another_scene_recolors_its_first_target_and_warns_when_the_order_cannot_follow(tmp_path):
+    # the checker scene has a blue right wall (B albedo 0.6): the demo's κ_B = 8 asks for more than order 4 holds
+    result = _run("demo", "-o", str(tmp_path / "c"), "--scene", "checker", "--resolution", "40")
+    assert result.returncode == 0, result.stderr
+    assert "capturing target 'right_wall'" in result.stderr
+    assert "albedit demo: warning: the recolor has not converged at order 4" in result.stderr, result.stderr
+    # a scene without a right wall: its first target, named, instead of an error
+    result = _run("demo", "-o", str(tmp_path / "t"), "--scene", "textured", "--resolution", "16",
+                  "--kappa", "0.5,1.2,0.8")
+    assert result.returncode == 0, result.stderr
+    assert "capturing target 'checker_wall'" in result.stderr
+    assert "warning" not in result.stderr, result.stderr
+
+
 def test_demo_runs_on_the_path_traced_rig(tmp_path):
     pytest.importorskip("mitsuba", reason="the mitsuba extra is not installed: pip install 'albedit[mitsuba]'")
     out = tmp_path / "demo"
