@@ -206,7 +206,7 @@ def part_noise(args):
     from engine.session import Session
     from engine.trust import recolor_trusted
 
-    res, spp = (32, 128) if args.quick else (args.resolution, args.spp)
+    res, spp = (32, 128) if args.quick else (args.resolution or 64, args.spp)
     print(f"\n== mitsuba:cornell {res}², {spp} spp per capture, order 4, κ = {K2.tolist()}, soft mask refined: "
           "noise reduction and Monte Carlo variance ==")
     rig = devices.open_rig(
