@@ -2,8 +2,9 @@
 (the filter runs before the edge blend).
 
 The blend extrapolates each edge pixel's target part from two target pixels and packs it with
-the neighbour's part into one set of components; filtering the blended decomposition mixes
-those with the outside pixels' own and made the edge worse than no noise reduction at all.
+the neighbour's part into one set of components, which a filter run afterwards must leave out;
+filtering the edge pixels with the pixels beside them before the split removes much of the
+Monte Carlo noise of their own observations (interreflected light only: they are not re-emitted).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ KAPPA = np.array([2.0, 0.125, 8.0])
 
 
 def test_noise_reduction_before_the_edge_blend_keeps_the_edge(tmp_path):
-    with devices.open_rig("mitsuba:cornell", ideal=True, resolution=(32, 32), spp=64, ambient_spp=256,
+    with devices.open_rig("mitsuba:cornell", ideal=True, resolution=(32, 32), spp=32, ambient_spp=256,
                           truth_spp=1024, coverage_passes=64, cache_dir=tmp_path, seed=3) as rig:
         rec = Recorder(rig, None)
         cal = calibrate_rig(rec, rig_name=rig.identity)
@@ -34,12 +35,14 @@ def test_noise_reduction_before_the_edge_blend_keeps_the_edge(tmp_path):
     obs = acq.observations
     errors = {
         "off": relative_error(recolor(acq.target.decompose(obs), KAPPA), truth, edge),
-        "before": relative_error(recolor(acq.target.decompose(obs, denoise=2), KAPPA), truth, edge),
-        "after": relative_error(recolor(denoise_components(acq.target.decompose(obs), obs[0], radius=2), KAPPA),
+        "before": relative_error(recolor(acq.target.decompose(obs, denoise=4), KAPPA), truth, edge),
+        "after": relative_error(recolor(denoise_components(acq.target.decompose(obs), obs[0], radius=4), KAPPA),
                                 truth, edge),
     }
-    # measured (seed 3): 17.9 % without noise reduction, 14.4 % filtered before the blend, 36.3 % after it
-    assert errors["before"] < 0.9 * errors["off"] and errors["before"] < 0.5 * errors["after"], errors
+    # measured (seed 3): 20.6 % without noise reduction, 17.3 % filtered before the blend, and 20.6 % filtered
+    # after it (which leaves the blended edge pixels out: filtering them with the neighbour's pixels once made
+    # them 36 %); the gain is the edge pixels filtered with the pixels beside them before they are split
+    assert errors["before"] < 0.9 * errors["off"] and errors["before"] < 0.9 * errors["after"], errors
 
 
 def test_frames_carry_their_monte_carlo_variance_and_acquisition_adds_it(tmp_path):
