@@ -6,9 +6,12 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
 * ``cornell`` — path-traced Cornell box (``mitsuba:cornell``), the right wall painted as the
   rig's hard mask (pixels at least half wall), order 4: error over the wall *with* its edge
   pixels against its interior, for κ = (0.5, 1.2, 0.8) and the paper's (2, 0.125, 8) with
-  noise reduction, and the whole image against the render's own noise floor (two
+  noise reduction (before the edge blend; beside it the previous order, the blended
+  decomposition filtered), and the whole image against the render's own noise floor (two
   independent truth renders). "soft" refines the hard mask from the photograph
   (:func:`engine.edge.refine_mask`); "soft (true coverage)" uses the rig's exact coverage.
+* ``noise`` — the same box, κ = (2, 0.125, 8): where its error comes from (noise reduction before or
+  after the edge blend, the noise-aware recolor with and without the Monte Carlo variance).
 * ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4), the true
   coverage also without the edge's stand-in (:func:`engine.edge.stand_in`, the previous behaviour),
   and the soft masks with noise reduction (radius 4) for κ = (2, 0.125, 8).
@@ -108,9 +111,12 @@ class Experiment:
         return next(iter(self._acq.values())).observations[0]
 
 
-def _decomposition(acq, denoise):
-    d = acq.target.decompose(acq.observations)
-    return denoise_components(d, acq.observations[0], radius=denoise) if denoise else d
+def _decomposition(acq, denoise, *, after=False):
+    """The acquisition's decomposition, noise-reduced with radius ``denoise`` (0: off) before the edge blend;
+    ``after``: the previous behaviour, the blended decomposition filtered."""
+    if after and denoise:
+        return denoise_components(acq.target.decompose(acq.observations), acq.observations[0], radius=denoise)
+    return acq.target.decompose(acq.observations, denoise=denoise)
 
 
 def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_truth=True):
@@ -127,8 +133,10 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
         denoise = denoise_for(kappa)
         naive = np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo)
         results = [("naive per-pixel", naive)]
-        for label, name in variants:
-            results.append((label, recolor(_decomposition(exp._acq[name], denoise), kappa)))
+        for label, name, *after in variants:  # ("label", "acquisition"[, "after": filter the blended one])
+            if after and not denoise:
+                continue
+            results.append((label, recolor(_decomposition(exp._acq[name], denoise, after=bool(after)), kappa)))
         for label, img in results:
             e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
             rows.append(
@@ -172,14 +180,95 @@ def part_cornell(args):
     exp.acquire("soft", soft)
     err = np.abs(soft - exp.coverage)[(exp.coverage > 0) & (exp.coverage < 1)]
     print(f"refined coverage vs true coverage on edge pixels: mean |error| {err.mean():.3f}")
-    variants = [("previous (hard mask)", "hard"), ("soft mask, refined", "soft")]
+    variants = [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"),
+                ("soft refined, filtered after blend", "soft", "after")]
     lamp = rig.truth.emitters()
     edge_table(exp, variants, [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     if not args.quick:
         exp.acquire("true", exp.coverage)
-        edge_table(exp, [("soft mask, true coverage", "true")], [K1, K2],
-                   denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
+        edge_table(exp, [("soft mask, true coverage", "true"), ("soft true, filtered after blend", "true", "after")],
+                   [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     rig.close()
+
+
+def part_noise(args):
+    """Where the path-traced Cornell box's κ_B = 8 error comes from: noise reduction and Monte Carlo variance.
+
+    One acquisition of the right wall refined into a soft mask (as ``cornell``), recolored with
+    κ = (2, 0.125, 8) several ways, each against one truth render (the ``cornell`` table's metric)
+    and against the mean of six (a reference with 1/√6 of a render's noise): no noise reduction,
+    the guided filter (radius 4) before the edge blend (now) and after it (before), before it
+    but leaving the outside pixels (coverage 0) or everything but the target unfiltered; the
+    noise-aware recolor (:mod:`engine.trust`) with each capture's Monte Carlo variance in the
+    covariance (:attr:`engine.rig.Frame.variance`) and without it (the same captures read back
+    from a session, which does not store it).
+    """
+    import tempfile
+    from pathlib import Path
+
+    from engine.decompose import Decomposition, decompose
+    from engine.edge import blend_edges
+    from engine.fill import fill_unreachable
+    from engine.session import Session
+    from engine.trust import recolor_trusted
+
+    res, spp = (32, 128) if args.quick else (args.resolution or 64, args.spp)
+    print(f"\n== mitsuba:cornell {res}², {spp} spp per capture, order 4, κ = {K2.tolist()}, soft mask refined: "
+          "noise reduction and Monte Carlo variance ==")
+    rig = devices.open_rig(
+        "mitsuba:cornell", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp, truth_spp=spp
+    )
+    ambient, flood = lighting(rig)
+    hard, cov_true = rig.targets["right_wall"], rig.coverage["right_wall"]
+    with tempfile.TemporaryDirectory() as folder:
+        session = Session.create(Path(folder) / "s", rig_name=rig.name, camera_resolution=rig.camera.resolution,
+                                 projector_resolution=rig.projector.resolution)
+        rec = Recorder(rig, session)
+        rig.camera.spp, rig.ambient = 64, True
+        cal = calibrate_rig(rec, rig_name=rig.identity)
+        rig.camera.spp, rig.ambient = spp, ambient
+        soft = refine_mask(hard, rec.capture("photograph", rec.black() if flood is None else flood))
+        acq = acquire_single(rec, cal, soft, 4, photograph_pattern=flood, name="soft")
+        again = Recorder(rig, session)  # every capture read back: the camera model's variance only
+        unknown = acquire_single(again, cal, soft, 4, photograph_pattern=flood, name="soft")
+        assert not again.taken
+    truths = [rig.truth.recolor([(hard, K2)], ambient=ambient, pattern=flood) for _ in range(6)]
+    reference = np.mean(truths, axis=0)
+    lamp = rig.truth.emitters()
+    rig.close()
+    wall, interior = cov_true > 0, interior_of(cov_true)
+    edge, keep = wall & ~interior, ~lamp
+    t, obs = acq.target, acq.observations
+    d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
+    filtered = denoise_components(d0, obs[0], radius=4)
+
+    def blended(d, unfiltered=None):
+        if unfiltered is not None:  # pixels that keep their measured components
+            d = Decomposition(np.where(unfiltered[None, :, :, None], d0.components, d.components),
+                              np.where(unfiltered[:, :, None], d0.unreached, d.unreached), d.target, d.constraint,
+                              d.unreached_light, d.residual, d.covariance)
+        return recolor(blend_edges(d, t.coverage, obs[0])[0], K2)
+
+    rows = [
+        ("no noise reduction", blended(d0)),
+        ("radius 4 before the edge blend (now)", blended(filtered)),
+        ("radius 4 after the edge blend (before)", recolor(denoise_components(t.decompose(obs), obs[0], radius=4), K2)),
+        ("radius 4 before, outside pixels unfiltered", blended(filtered, t.coverage <= 0)),
+        ("radius 4 before, only the target filtered", blended(filtered, t.coverage < 1)),
+        ("noise-aware, Monte Carlo variance known", recolor_trusted(t.trust(obs, acq.covariance), K2).image),
+        ("noise-aware, Monte Carlo variance unknown", recolor_trusted(
+            unknown.target.trust(unknown.observations, unknown.covariance), K2).image),
+    ]
+    print(f"noise floor (one truth against the mean of the other five): image "
+          f"{100 * relative_error(truths[0], np.mean(truths[1:], axis=0), keep):.2f}%")
+    print(f"{'method':<44} {'against':<10} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} "
+          f"{'off wall':>8}")
+    for label, img in rows:
+        for name, truth in (("one truth", truths[0]), ("reference", reference)):
+            e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
+            print(f"{label:<44} {name:<10} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {e_wall / max(e_in, 1e-12):6.2f} "
+                  f"{100 * relative_error(img, truth, edge):7.2f}% {100 * relative_error(img, truth, keep):7.2f}% "
+                  f"{100 * relative_error(img, truth, keep & ~wall):7.2f}%", flush=True)
 
 
 def part_virtual(args):
@@ -554,6 +643,7 @@ def part_ratio(args):
 PARTS = {
     "ratio": part_ratio,
     "cornell": part_cornell,
+    "noise": part_noise,
     "virtual": part_virtual,
     "edge": part_edge,
     "posed": part_posed,

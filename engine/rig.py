@@ -41,6 +41,13 @@ class Frame:
         of ``image`` at this exposure and gain), when the backend knows it; ``math.inf`` for a
         camera that does not clip at all (an ideal simulated sensor). Exposure control judges
         the bright end against it instead of waiting for pixels to clip.
+    variance : (H, W, 3) float32 or None
+        Variance of ``image`` that the camera's noise model (``metadata["noise"]``, the
+        calibration's) does not describe, per pixel and channel in ``image``'s units squared,
+        when the backend estimates it: a path tracer's Monte Carlo noise (the ``mitsuba:`` rig,
+        from the difference of two half-sample renders). :class:`engine.acquire.Recorder`
+        adds it to the model's variance. Not stored in a session: a capture read back from one
+        carries the model's variance only. Default: none.
     """
 
     image: np.ndarray
@@ -50,6 +57,7 @@ class Frame:
     saturated: np.ndarray = None  # type: ignore[assignment]  # filled in __post_init__
     metadata: dict[str, Any] = field(default_factory=dict)
     full_scale: float | None = None
+    variance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.saturated is None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +68,10 @@ def probe() -> list[Availability]:
 class MitsubaCamera(VirtualCamera):
     """The virtual camera's sensor model (noise, black level, ADC, clipping) on a path-traced render.
 
-    Frames also record ``spp``, the samples per pixel of the projector render.
+    Frames also record ``spp``, the samples per pixel of the projector render, and carry its
+    Monte Carlo variance as :attr:`engine.rig.Frame.variance` (from two half-sample renders,
+    :meth:`devices.mitsuba.render.Renderer.render`), which acquisition adds to the camera
+    model's: the noise-aware recolor then weighs render noise as it weighs photon noise.
     """
 
     def capture(self) -> Frame:
@@ -75,7 +79,7 @@ class MitsubaCamera(VirtualCamera):
         frame = super().capture()
         frame.metadata["spp"] = self._renderer.spp
         frame.metadata["ambient_spp"] = self._renderer.ambient_spp
-        return frame
+        return replace(frame, variance=self._renderer.last_variance)
 
     @property
     def spp(self) -> int:

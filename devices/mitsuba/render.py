@@ -114,6 +114,7 @@ class Renderer:
         self._emitter_keys = self._ambient_keys()
         self._saved = {k: self._get(k) for k in self._emitter_keys}
         self._ambient_image: np.ndarray | None = None
+        self.last_variance: np.ndarray | None = None  # of the last render()'s projector light
         self._lights: tuple[bool, str | None] | None = None  # (ambient on, hash of the emitted pattern)
 
     # --- building -------------------------------------------------------------------------
@@ -324,9 +325,28 @@ class Renderer:
         Returns
         -------
         (H, W, 3) ``dtype``
+
+        Notes
+        -----
+        The projector render is two independent renders of ``spp / 2`` samples each, averaged
+        (the same samples as one render of ``spp``); :attr:`last_variance` is the Monte Carlo
+        variance of their mean estimated from their difference, ``(a − b)² n m / spp²`` for
+        halves of ``n`` and ``m`` samples (an unbiased estimate, one degree of freedom per
+        pixel; None at ``spp`` = 1). The cached ambient image's own noise is not included:
+        every capture shares it, so it cancels in the differences acquisition takes.
         """
         ambient = self.ambient if ambient is None else ambient
-        img = self.render_lights(ambient=False, emitted=emitted, spp=self.spp, seed=self._next_seed())
+        n = self.spp // 2
+        if n >= 1:  # two independent halves: their mean is the render, their difference its noise
+            m = self.spp - n
+            a = self.render_lights(ambient=False, emitted=emitted, spp=n, seed=self._next_seed())
+            b = self.render_lights(ambient=False, emitted=emitted, spp=m, seed=self._next_seed())
+            img = (a * np.float32(n / self.spp) + b * np.float32(m / self.spp)).astype(np.float32)
+            diff = a.astype(np.float64) - b
+            self.last_variance = (diff * diff * (n * m / self.spp**2)).astype(np.float32)
+        else:
+            img = self.render_lights(ambient=False, emitted=emitted, spp=self.spp, seed=self._next_seed())
+            self.last_variance = None
         if ambient:
             img = img + self.ambient_image()
         return img.astype(dtype)

@@ -63,8 +63,9 @@ class Recorder:
     last_saturated : (H, W) bool or None
         Clipped pixels of the last capture (after bracketing), None if unknown.
     last_variance : (H, W, 3) float32 or None
-        Variance of the last capture (:func:`engine.noise.frame_variance`), None when
-        neither the frame nor :attr:`noise` knows the camera's noise.
+        Variance of the last capture (:func:`engine.noise.frame_variance`, plus the frame's own
+        :attr:`engine.rig.Frame.variance` when it reports one), None when neither the frame nor
+        :attr:`noise` knows the camera's noise.
     """
 
     rig: RigLike
@@ -134,8 +135,8 @@ class Recorder:
             frame = self._bracketed(self._shot(identity), identity)
             image = np.asarray(frame.image, np.float32)
             self.last_saturated = np.asarray(frame.saturated, bool)
-            self.last_variance = frame_variance(image, float(frame.exposure), getattr(frame, "metadata", None),
-                                                self.noise)
+            self.last_variance = _with_own_variance(
+                frame_variance(image, float(frame.exposure), getattr(frame, "metadata", None), self.noise), frame)
             if self.session is not None:
                 try:
                     self.session.add_frame(name, frame, pattern_id=pid, meta=meta or {})
@@ -173,8 +174,12 @@ class Recorder:
         saturated = np.logical_or.reduce([np.asarray(f.saturated, bool) for f in shots])
         meta = dict(getattr(first, "metadata", {}) or {})
         meta["frames"] = self.frames
+        own = [v for v in (getattr(f, "variance", None) for f in shots) if v is not None]
+        variance = None
+        if len(own) == len(shots):  # of the mean: Σ var / n²
+            variance = np.asarray(np.sum(np.stack(own), axis=0, dtype=np.float64) / self.frames**2, np.float32)
         return Frame(image, first.exposure, getattr(first, "gain", 1.0), getattr(first, "black_level", 0.0),
-                     saturated, meta)
+                     saturated, meta, variance=variance)
 
     def _bracketed(self, frame, identity: str):
         """Complete the frame's saturated pixels from shorter exposures (same projector image)."""
@@ -183,6 +188,8 @@ class Recorder:
         if self.brackets <= 0 or not saturated.any():
             return frame
         image = np.array(frame.image, np.float32)
+        own = getattr(frame, "variance", None)
+        variance = None if own is None else np.array(own, np.float32)
         start = camera.exposure
         used = []
         refused = None
@@ -196,6 +203,12 @@ class Recorder:
                 short = self._shot(f"{identity}|bracket{step}")  # a failing capture is a device fault: it propagates
                 fix = saturated & ~np.asarray(short.saturated, bool)
                 image[fix] = short.image[fix]
+                if variance is not None:
+                    short_own = getattr(short, "variance", None)
+                    if short_own is None:
+                        variance = None  # the completed pixels' own variance is unknown
+                    else:
+                        variance[fix] = np.asarray(short_own, np.float32)[fix]
                 saturated = saturated & np.asarray(short.saturated, bool)
                 used.append(float(camera.exposure))
                 if not saturated.any():
@@ -208,9 +221,20 @@ class Recorder:
         if refused is not None:
             meta["bracketing_refused"] = refused
         return Frame(image, frame.exposure, getattr(frame, "gain", 1.0), getattr(frame, "black_level", 0.0),
-                     saturated, meta)
+                     saturated, meta, variance=variance)
 
     def black(self) -> np.ndarray:
         """A black projector image of the rig's projector resolution."""
         hp, wp = self.rig.projector.resolution
         return np.zeros((hp, wp, 3), np.float32)
+
+
+def _with_own_variance(variance: np.ndarray | None, frame) -> np.ndarray | None:
+    """The model's ``variance`` of a frame plus the variance the frame reports itself (:attr:`Frame.variance`).
+
+    None stays None: without a noise model for the camera no covariance is tracked at all.
+    """
+    own = getattr(frame, "variance", None)
+    if variance is None or own is None:
+        return variance
+    return (variance + np.asarray(own, np.float32)).astype(np.float32)

