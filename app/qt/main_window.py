@@ -597,14 +597,19 @@ class MainWindow(QMainWindow):
             doc.set_noise_reduction(0)
             return
         from engine.denoise import denoise_components
+        from engine.workflow import noise_reduced
 
         def done(d):
             if doc is self.doc and doc.acquisition is not None and doc.acquisition.raw is acq.raw:
                 doc.set_noise_reduction(int(radius), d)
                 self.statusBar().showMessage(f"Noise reduction applied (radius {int(radius)} px)", 8000)
 
-        self.run_job(denoise_components, acq.raw, doc.photograph, radius=int(radius), name="Noise reduction",
-                     on_done=done)
+        if self.session is not None:  # as `albedit recolor --denoise`: a soft mask is filtered before its edge blend
+            self.run_job(noise_reduced, self.session, acq.key, acq.raw, int(radius), name="Noise reduction",
+                         on_done=done)
+        else:
+            self.run_job(denoise_components, acq.raw, doc.photograph, radius=int(radius), name="Noise reduction",
+                         on_done=done)
 
     def open_demo(self, rig_name: str | None = None) -> None:
         """Open the virtual-rig demo (File ▸ Virtual Rig Demo)."""

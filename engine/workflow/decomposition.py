@@ -16,6 +16,7 @@ from engine.acquire import Adaptive, CaptureSettings, CascadeResult, Recorder, a
 from engine.decompose import Decomposition
 from engine.denoise import denoise_components
 from engine.errors import DeviceError, InputError, SessionError
+from engine.progress import Progress, ShouldStop
 from engine.rig import Camera, Frame, Projector
 from engine.session import Session
 from engine.session.edit import Edit, mask_name
@@ -92,7 +93,8 @@ def load_decomposition(session: Session, key: str | None = None, *, rig=None, de
 
 
 def noise_reduced(session: Session, key: str, decomposition: Decomposition, radius: int, *,
-                  photograph: str | None = None) -> Decomposition:
+                  photograph: str | None = None, progress: Progress | None = None,
+                  should_stop: ShouldStop | None = None) -> Decomposition:
     """``decomposition`` (cached under ``key``) noise-reduced with ``radius``, and cached under its own key.
 
     Guided by the session's photograph (:func:`photograph_name`, or the capture ``photograph``);
@@ -105,17 +107,19 @@ def noise_reduced(session: Session, key: str, decomposition: Decomposition, radi
     11.9 % filtering the blended decomposition (which leaves the blended pixels out). When the
     session cannot give the acquisition back, the blended decomposition is filtered.
     A session that cannot be written (read-only, locked by another writer) still gets the
-    result, uncached.
+    result, uncached. ``progress`` and ``should_stop`` are passed to the filter (and
+    ``should_stop`` to the recompute), as :func:`engine.denoise.denoise_components` takes them.
     """
     filtered = None
     if decomposition.blended is not None and decomposition.blended.any():
         try:
-            filtered = _recompute(session, denoise=radius)
+            filtered = _recompute(session, denoise=radius, should_stop=should_stop)
         except (SessionError, DeviceError, InputError):
             filtered = None  # the captures are not all there: filter what we have
     if filtered is None:
         photo = session.read_capture(photograph or photograph_name(session))
-        filtered = denoise_components(decomposition, photo, radius=radius)
+        filtered = denoise_components(decomposition, photo, radius=radius, progress=progress,
+                                      should_stop=should_stop)
     _cache_best_effort(session, denoised_key(key, radius), filtered)
     return filtered
 
@@ -202,8 +206,8 @@ class _OfflineRig:
         return cls(session.rig_name, session.rig_name, _OfflineCamera(session), _OfflineProjector(session))
 
 
-def _recompute(session: Session, rig=None, *, denoise: int = 0) -> Decomposition:
-    result = reacquired(session, rig)
+def _recompute(session: Session, rig=None, *, denoise: int = 0, should_stop: ShouldStop | None = None) -> Decomposition:
+    result = reacquired(session, rig, should_stop=should_stop)
     return result.targets[-1][1].decompose(result.acquisition.observations, covariance=result.acquisition.covariance,
                                            denoise=denoise)
 

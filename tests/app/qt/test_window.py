@@ -320,6 +320,35 @@ def test_noise_reduction_applies_previews_exports_and_is_restored(make_window, a
         f"{acquired_doc.acquisition.key}-denoise2"]
 
 
+def test_noise_reduction_of_a_soft_mask_session_filters_before_the_edge_blend_as_the_cli_does(make_window, tmp_path):
+    from PySide6.QtCore import Qt
+    from PySide6.QtTest import QTest
+    from PySide6.QtWidgets import QPushButton, QSpinBox
+
+    import devices
+    from engine.denoise import denoise_components
+    from engine.workflow import load_decomposition, open_session_for_rig, run_calibration, run_capture
+
+    with devices.open_rig("virtual:cornell", resolution=(24, 24), seed=2, supersample=2) as rig:
+        session = open_session_for_rig(tmp_path / "s", rig)
+        run_calibration(rig, session, levels=5)
+        run_capture(rig, session, [("right_wall", rig.coverage["right_wall"])], 3)
+    doc, session, warnings = files.open_document(tmp_path / "s")
+    measured = doc.decomposition
+    assert measured.blended is not None and measured.blended.any()  # a soft mask: edge pixels blended
+    w = make_window(doc, session)
+    radius = w.findChild(QSpinBox, "noise_radius")
+    radius.setValue(2)
+    QTest.mouseClick(w.findChild(QPushButton, "noise_apply"), Qt.MouseButton.LeftButton)  # a job (synchronous)
+    assert doc.acquisition.denoise == 2
+    # the same decomposition as `albedit recolor --denoise 2`, not the blended one filtered
+    expected = load_decomposition(Session.open(tmp_path / "s"), doc.acquisition.key, denoise=2)
+    np.testing.assert_array_equal(doc.decomposition.components, expected.components)
+    filtered_after = denoise_components(measured, doc.photograph, radius=2)
+    assert not np.allclose(doc.decomposition.components[:, measured.blended],
+                           filtered_after.components[:, measured.blended])
+
+
 def test_application_icon_renders(qtbot):
     from PySide6.QtGui import QIcon
 
