@@ -173,6 +173,15 @@ class Decomposition:
         return self.order - 1 if self.unreached_light else self.order
 
     @property
+    def unblended_outside(self) -> np.ndarray:
+        """``(H, W)`` bool: non-target pixels holding their own components only (not :attr:`blended`).
+
+        The region a filter across pixels may mix outside the target: a blended edge pixel packs
+        two surfaces' parts in the same slots and must be kept apart from it.
+        """
+        return ~self.target if self.blended is None else ~self.target & ~self.blended
+
+    @property
     def inside(self) -> np.ndarray:
         """``(K, H, W, C)``: ``R^i L_d`` on target pixels, zero elsewhere (a new array)."""
         return np.where(self.target[None, :, :, None], self.components, 0).astype(self.components.dtype)

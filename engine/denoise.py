@@ -88,8 +88,7 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     # a soft mask's blended edge pixels hold the target part's light (its direct light too) beside the
     # neighbour's: filtered with the neighbour's pixels, each took the other's shares (ideal supersampled
     # Cornell box, 64², κ = (2, 0.125, 8), radius 4, no noise: the edge pixels' error 20 %, 2.0 % kept)
-    outside = ~target if decomposition.blended is None else ~target & ~decomposition.blended
-    jobs = [(target, inside_ids), (outside, outside_ids)]
+    jobs = [(target, inside_ids), (decomposition.unblended_outside, outside_ids)]
     smoothed = comps.copy()
     tasks = [(region, ids, ch) for region, ids in jobs if ids and region.any() for ch in range(c)]
 

@@ -485,7 +485,7 @@ def _level(d: Decomposition, radii, window: int, should_stop) -> TrustLevel:
     photo_share = np.zeros((n, h, w, c), np.float32)
     # a soft mask's blended edge pixels hold the target part's light (its direct light too) beside the neighbour's:
     # their shares are smoothed among themselves only, and never read by the neighbour's
-    regions = [d.target, ~d.target] if d.blended is None else [d.target, ~d.target & ~d.blended, d.blended & ~d.target]
+    regions = [d.target, d.unblended_outside] + ([] if d.blended is None else [d.blended & ~d.target])
     for ch in range(c):
         def cov(a: int, b: int, ch=ch) -> np.ndarray:
             return packed[packed_index(a, b, k), ..., ch].astype(np.float64)

@@ -331,8 +331,8 @@ def prepare_target(
 
         sigma = np.sqrt(variance) if known else 0.0
         solid_d = np.where(usable[:, :, None], direct, 0).astype(np.float32)
-        brightest = cv2.dilate(solid_d, np.ones((3, 3), np.uint8))
-        real = (direct > 2 * sigma) & (direct > EDGE_DIRECT_FLOOR * brightest)
+        neighbour_d = cv2.dilate(solid_d, np.ones((3, 3), np.uint8))  # the brightest solid neighbour's D
+        real = (direct > 2 * sigma) & (direct > EDGE_DIRECT_FLOOR * neighbour_d)
         edge_direct = np.where(edge_px[:, :, None] & real, direct, 0).astype(np.float32)
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     direct_matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
