@@ -31,15 +31,22 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
   recolored, and every interaction with the wall (gloss too) weighted by κ, as the paper's
   Fig. 13 counts interaction components — then the hard mask and a posed projector beside the
   co-axial one, and the render noise (spp) of a sharp coat.
+* ``fig13spp`` — Fig. 13's failing cells (specular share 0.1 at α = 0.009 and 0.05, and no coat)
+  at each ``--fig13-spp-sweep``: the paper's metric beside its own Monte Carlo noise, and noise
+  reduction sized from the measured noise and the noise-aware recolor beside the plain one.
 * ``fig3`` — a diffuse box on a glossy floor (``mitsuba:floor``): the box's reflection.
-* ``fig12`` — a textured target (``mitsuba:textured`` and ``virtual:textured``), κ = (2, 0.125, 1.2).
+* ``fig12`` — a textured target (``virtual:textured``, then ``mitsuba:textured`` at each
+  ``--fig12-spp``), κ = (2, 0.125, 1.2), against one truth render and against the mean of
+  ``--fig12-truths``; the soft mask plain, with noise reduction sized from the measured noise,
+  and noise-aware.
 * ``ratio`` — interreflection-to-direct ratio on the Cornell right wall (ceiling light, projector white):
   the virtual rig's radiosity at several patch sizes against Mitsuba's path tracer.
 
 Errors are ‖ours − truth‖₂ / ‖truth‖₂ (the lamp's pixels left out of "image"); the Monte
 Carlo noise of the truth renders is part of every mitsuba figure (the noise-floor column).
 
-Run: nice .venv/bin/python bench/optics.py [--parts cornell virtual edge posed realistic fig13 fig3 fig12 ratio]
+Run: nice .venv/bin/python bench/optics.py [--parts cornell virtual edge posed realistic fig13 fig13spp fig3 fig12
+ratio]
 [--quick]
 """
 
@@ -58,6 +65,7 @@ from engine.acquire.predict import relative_error
 from engine.denoise import denoise_components
 from engine.edge import refine_mask
 from engine.recolor import recolor
+from engine.trust import recolor_trusted
 
 K1 = np.array([0.5, 1.2, 0.8])
 K2 = np.array([2.0, 0.125, 8.0])
@@ -206,11 +214,10 @@ def part_noise(args):
     import tempfile
     from pathlib import Path
 
-    from engine.decompose import Decomposition, decompose
+    from engine.decompose import decompose
     from engine.edge import blend_edges
     from engine.fill import fill_unreachable
     from engine.session import Session
-    from engine.trust import recolor_trusted
 
     res, spp = (32, 128) if args.quick else (args.resolution or 64, args.spp)
     print(f"\n== mitsuba:cornell {res}², {spp} spp per capture, order 4, κ = {K2.tolist()}, soft mask refined: "
@@ -238,15 +245,15 @@ def part_noise(args):
     rig.close()
     wall, interior = cov_true > 0, interior_of(cov_true)
     edge, keep = wall & ~interior, ~lamp
+    if not radius:
+        return _decomposition(acq, 0)
     t, obs = acq.target, acq.observations
     d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
     filtered = denoise_components(d0, obs[0], radius=4)
 
     def blended(d, unfiltered=None):
-        if unfiltered is not None:  # pixels that keep their measured components
-            d = Decomposition(np.where(unfiltered[None, :, :, None], d0.components, d.components),
-                              np.where(unfiltered[:, :, None], d0.unreached, d.unreached), d.target, d.constraint,
-                              d.unreached_light, d.residual, d.covariance)
+        if unfiltered is not None:
+            d = _keep_measured(d, d0, unfiltered)
         return recolor(blend_edges(d, t.coverage, obs[0])[0], K2)
 
     rows = [
@@ -269,6 +276,30 @@ def part_noise(args):
             print(f"{label:<44} {name:<10} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {e_wall / max(e_in, 1e-12):6.2f} "
                   f"{100 * relative_error(img, truth, edge):7.2f}% {100 * relative_error(img, truth, keep):7.2f}% "
                   f"{100 * relative_error(img, truth, keep & ~wall):7.2f}%", flush=True)
+
+
+def _keep_measured(filtered, measured, unfiltered):
+    """``filtered`` with the pixels ``unfiltered`` (H, W) bool keeping their ``measured`` components."""
+    from engine.decompose import Decomposition
+
+    return Decomposition(np.where(unfiltered[None, :, :, None], measured.components, filtered.components),
+                         np.where(unfiltered[:, :, None], measured.unreached, filtered.unreached), filtered.target,
+                         filtered.constraint, filtered.unreached_light, filtered.residual, filtered.covariance)
+
+
+def _denoised_on_target(acq, radius):
+    """The acquisition's decomposition noise-reduced before the edge blend, the outside pixels (coverage 0)
+    left as measured (the filter's bias there is not worth its gain on a whole-image figure)."""
+    from engine.decompose import decompose
+    from engine.edge import blend_edges
+    from engine.fill import fill_unreachable
+
+    if not radius:
+        return _decomposition(acq, 0)
+    t, obs = acq.target, acq.observations
+    d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
+    d = _keep_measured(denoise_components(d0, obs[0], radius=radius), d0, t.coverage <= 0)
+    return blend_edges(d, t.coverage, obs[0])[0]
 
 
 def part_virtual(args):
@@ -440,7 +471,8 @@ def part_posed(args):
         print(f"{pose:<9} {_cell(fig13_cell(0.0, 0.009, res=24, spp=args.fig13_spp, pose=pose))}", flush=True)
 
 
-def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibrations=None, components=False):
+def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibrations=None, components=False,
+               extra=False):
     """One coat of the wedge's left wall: our recolor against the two truths, the naive one, the noise.
 
     Returns a dict of relative errors (fractions): ``paint`` (truth: the diffuse reflectance under
@@ -452,7 +484,15 @@ def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibration
     ``components`` adds ``paper``: the paper's Fig. 13 metric — per interaction component, the
     mean absolute error over the truth component's peak (its 99th percentile: Monte Carlo
     fireflies are no peak; :meth:`devices.mitsuba.truth.Truth.components`, rendered at ``spp``),
-    averaged over the four.
+    averaged over the four. ``extra`` (with ``components``) adds ``paper_floor`` (the metric of a
+    second truth components render against the first: the metric's own Monte Carlo noise at
+    ``spp``), ``paper_ref`` (ours against the mean of the two renders), ``radius`` (noise
+    reduction sized from the measured noise, :func:`app.model.noise.denoise_radius`, as the
+    app and ``albedit demo`` size it) with ``paper_dn`` / ``paint_dn`` / ``every_dn`` (the
+    same, noise-reduced with that radius; the metric against the first render), ``paper_w``
+    (the decomposition weighted by the captures' covariance, Monte Carlo variance included), and
+    ``paint_trust`` / ``every_trust`` (the noise-aware recolor, :mod:`engine.trust`, with each
+    capture's Monte Carlo variance in its covariance).
     """
     rig = devices.open_rig("mitsuba:wedge", ideal=True, resolution=(res, res), spp=spp, truth_spp=4 * spp,
                            specular=share, roughness=alpha, projector=pose)
@@ -485,9 +525,29 @@ def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibration
         c = rig.truth.components(hard, 4, ambient=ambient, pattern=flood)
         true = c.inside + c.outside
         peaks = [np.percentile(true[i], 99) for i in range(4)]  # a firefly is no peak
-        out["paper"] = float(np.mean([np.abs(d.components[i] - true[i]).mean() / peaks[i] for i in range(4)]))
+        out["paper"] = _paper_metric(d.components, true, peaks)
+        if extra:
+            c2 = rig.truth.components(hard, 4, ambient=ambient, pattern=flood)
+            true2 = c2.inside + c2.outside
+            out["paper_floor"] = _paper_metric(true2, true, peaks)
+            out["paper_ref"] = _paper_metric(d.components, (true + true2) / 2, peaks)
+            size = denoise_radius(d)[0]
+            dn = acq.target.decompose(acq.observations, denoise=size) if size else d
+            out["radius"] = size
+            out["paper_dn"] = _paper_metric(dn.components, true, peaks)
+            weighted = acq.target.decompose(acq.observations, covariance=acq.covariance)
+            out["paper_w"] = _paper_metric(weighted.components, true, peaks)
+            for name, img in (("dn", recolor(dn, FIG13_KAPPA)), ("trust", recolor_trusted(
+                    acq.target.trust(acq.observations, acq.covariance), FIG13_KAPPA).image)):
+                out["paint_" + name] = relative_error(img, paint)
+                out["every_" + name] = relative_error(img, every)
     rig.close()
     return out
+
+
+def _paper_metric(components, true, peaks) -> float:
+    """The paper's Fig. 13 metric: mean |error| of each component over the truth's peak, averaged."""
+    return float(np.mean([np.abs(components[i] - true[i]).mean() / peaks[i] for i in range(len(peaks))]))
 
 
 def _cell(e) -> str:
@@ -538,6 +598,35 @@ def part_fig13(args):
               flush=True)
 
 
+def part_fig13_samples(args):
+    """Fig. 13's failing cells against samples: no coat and s = 0.1 at α = 0.009 and 0.05, at each
+    ``--fig13-spp-sweep`` (captures; the recolor's truths at 4×, the components at the same spp)."""
+    res = 24
+    sweep = [64, 128] if args.quick else args.fig13_spp_sweep
+    print(f"\n== Fig. 13 against samples: mitsuba:wedge {res}², left wall glossy, κ = {FIG13_KAPPA.tolist()}, "
+          "order 4, ideal, co-axial, true coverage ==")
+    print("the paper's metric (mean |error| of each component over its peak, averaged over the 4), %: ours against "
+          "one truth components render, against the mean of two, the metric of one truth render against the other "
+          "(its own noise), ours noise-reduced with the measured radius r, ours weighted by the captures' covariance "
+          "(w); then the recolor's error, %: ours / "
+          "noise-reduced / noise-aware (Monte Carlo variance) against the every-interaction truth, and against paint; "
+          "naive; (two paint truths)")
+    print(f"{'s':>5} {'α':>6} {'spp':>5} {'paper':>6} {'ref':>6} {'floor':>6} {'r':>2} {'dn':>6} {'w':>6} | "
+          f"{'every':>6} {'dn':>6} {'trust':>6} | {'paint':>6} {'dn':>6} {'trust':>6} | {'naive':>6} {'(floor)':>7} "
+          f"{'time':>6}")
+    cals: dict = {}
+    for share, alpha in [(0.0, 0.009), (0.1, 0.009), (0.1, 0.05)]:
+        for spp in sweep:
+            t = time.perf_counter()
+            e = fig13_cell(share, alpha, res=res, spp=spp, calibrations=cals, components=True, extra=True)
+            print(f"{share:5.2f} {alpha:6.3f} {spp:5d} "
+                  + " ".join(f"{100 * e[k]:6.2f}" for k in ("paper", "paper_ref", "paper_floor"))
+                  + f" {e['radius']:2d} {100 * e['paper_dn']:6.2f} {100 * e['paper_w']:6.2f} | "
+                  + " ".join(f"{100 * e[k]:6.2f}" for k in ("every", "every_dn", "every_trust")) + " | "
+                  + " ".join(f"{100 * e[k]:6.2f}" for k in ("paint", "paint_dn", "paint_trust"))
+                  + f" | {100 * e['naive']:6.2f} ({100 * e['floor']:5.2f}) {time.perf_counter() - t:5.0f}s", flush=True)
+
+
 def part_fig3(args):
     res, spp = (32, 128) if args.quick else (48, 1024)
     kappa = np.array([1.3, 0.6, 0.2])
@@ -572,33 +661,112 @@ def part_fig3(args):
     rig.close()
 
 
+FIG12_KAPPA = np.array([2.0, 0.125, 1.2])
+
+
+def _edge_share(img, truth, region, edge) -> float:
+    """Fraction of the squared error over ``region`` that the ``edge`` pixels carry."""
+    err = ((np.asarray(img, np.float64) - truth) ** 2).sum(-1)
+    return float(err[edge & region].sum() / max(err[region].sum(), 1e-30))
+
+
 def part_fig12(args):
-    kappa = np.array([2.0, 0.125, 1.2])
-    for backend in ("virtual", "mitsuba"):
-        if backend == "virtual":
-            res = 48 if args.quick else 128
-            rig = devices.open_rig("virtual:textured", ideal=True, resolution=(res, res), supersample=4)
-            exp = Experiment(rig, "checker_wall", 4)
-            label = f"virtual:textured {res}², supersampled 4×4"
-        else:
-            res, spp = (32, 128) if args.quick else (48, 1024)
-            rig = devices.open_rig(
-                "mitsuba:textured", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp, truth_spp=spp
-            )
-            exp = Experiment(rig, "checker_wall", 4, cal_spp=64, spp=spp)
-            label = f"mitsuba:textured {res}², {spp} spp"
-        print(f"\n== Fig. 12: {label}, textured target, κ = {kappa.tolist()}, order 4 ==")
+    """Fig. 12, a textured target: the ideal virtual rig, then the path-traced one at each ``--fig12-spp``.
+
+    Path-traced, every recolor is measured against one truth render (the previous table's
+    metric) and against the mean of ``--fig12-truths`` truth renders at the captures' spp (a
+    reference with 1/√n of a render's noise; its own residual noise printed from the
+    difference of its two halves). Variants: naive, the previous behaviour (hard mask), the
+    soft mask refined from the photograph without noise reduction, with noise reduction sized
+    from the measured noise as the app and ``albedit demo`` size it
+    (:func:`app.model.noise.denoise_radius`), and the noise-aware recolor (:mod:`engine.trust`)
+    with each capture's Monte Carlo variance (:attr:`engine.rig.Frame.variance`) in its
+    covariance.
+    """
+    _fig12_virtual(args)
+    kappa = FIG12_KAPPA
+    res = 32 if args.quick else 48
+    for spp in [128] if args.quick else args.fig12_spp:
+        rig = devices.open_rig(
+            "mitsuba:textured", ideal=True, resolution=(res, res), spp=spp, ambient_spp=4 * spp, truth_spp=spp
+        )
+        print(f"\n== Fig. 12: mitsuba:textured {res}², {spp} spp (captures and truth), textured target, "
+              f"κ = {kappa.tolist()}, order 4 ==")
+        exp = Experiment(rig, "checker_wall", 4, cal_spp=64, spp=spp)
         exp.acquire("hard", exp.hard)
         exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
-        edge_table(
-            exp,
-            [("previous (hard mask)", "hard"), ("soft mask, refined", "soft")],
-            [kappa],
-            denoise_for=lambda k: 0,
-            lamp=rig.truth.emitters(),
-            floor_truth=backend == "mitsuba",
-        )
+        _fig12_table(exp, kappa, args.fig12_truths, ~rig.truth.emitters())
         rig.close()
+
+
+def _fig12_virtual(args) -> None:
+    """Fig. 12 on the ideal supersampled virtual rig: which pixels carry the wall's error."""
+    kappa = FIG12_KAPPA
+    res = 48 if args.quick else 128
+    rig = devices.open_rig("virtual:textured", ideal=True, resolution=(res, res), supersample=4)
+    exp = Experiment(rig, "checker_wall", 4)
+    print(f"\n== Fig. 12: virtual:textured {res}², supersampled 4×4, textured target, κ = {kappa.tolist()}, "
+          "order 4 ==")
+    exp.acquire("hard", exp.hard)
+    refined = refine_mask(exp.hard, exp.photograph())
+    exp.acquire("soft", refined)
+    exp.acquire("true", exp.coverage)
+    edge_table(exp, [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"),
+                     ("soft mask, true coverage", "true")], [kappa],
+               denoise_for=lambda k: 0, lamp=rig.truth.emitters(), floor_truth=False)
+    truth, cov = exp.truth(kappa), exp.coverage
+    wall, interior = cov > 0, interior_of(cov)
+    edge, keep = wall & ~interior, ~rig.truth.emitters()
+    mixed = (cov > 0) & (cov < 1)
+    print(f"refined coverage vs true on mixed pixels: mean |error| {np.abs(refined - cov)[mixed].mean():.3f}")
+    for name in ("soft", "true"):
+        img = recolor(_decomposition(exp._acq[name], 0), kappa)
+        print(f"{name}: the edge pixels ({edge.sum()} of the wall's {wall.sum()}, {mixed.sum()} of them mixed) carry "
+              f"{100 * _edge_share(img, truth, wall, edge):.1f}% of the wall's squared error; mixed pixels alone "
+              f"{100 * relative_error(img, truth, mixed):.2f}%, solid edge pixels "
+              f"{100 * relative_error(img, truth, edge & ~mixed):.2f}%; the paper's figure is the whole image: "
+              f"{100 * relative_error(img, truth, keep):.2f}%", flush=True)
+    rig.close()
+
+
+def _fig12_table(exp: Experiment, kappa, n_truths: int, keep) -> None:
+    cov = exp.coverage
+    wall, interior = cov > 0, interior_of(cov)
+    edge = wall & ~interior
+    regions = {"wall+edge": wall, "interior": interior, "edge": edge, "image": keep}
+    t = time.perf_counter()
+    truths = [exp.truth(kappa) for _ in range(n_truths)]
+    exp.seconds[f"{n_truths} truths"] = time.perf_counter() - t
+    reference = np.mean(truths, axis=0)
+    half = n_truths // 2
+    first, second = np.mean(truths[:half], axis=0), np.mean(truths[half:2 * half], axis=0)
+    print("noise: one truth render against another (the previous table's floor) / the reference's own "
+          f"(mean of {n_truths}; half the difference of its halves' means):")
+    print("  " + ", ".join(f"{name} {100 * relative_error(truths[1], truths[0], m):.2f} / "
+                           f"{100 * relative_error(first, second, m) / 2:.2f}%" for name, m in regions.items()))
+    photo = exp.photograph()
+    soft = exp._acq["soft"]
+    d = soft.target.decompose(soft.observations)
+    size, noise = denoise_radius(d)
+    trusted = soft.target.trust(soft.observations, soft.covariance)
+    rows = [
+        ("naive per-pixel", np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo)),
+        ("previous (hard mask)", recolor(_decomposition(exp._acq["hard"], 0), kappa)),
+        ("soft mask, refined", recolor(d, kappa)),
+        (f"soft refined, denoise {size} (measured)", recolor(_decomposition(soft, size), kappa)),
+        (f"soft refined, denoise {size}, wall only", recolor(_denoised_on_target(soft, size), kappa)),
+        ("soft refined, noise-aware (MC var.)", recolor_trusted(trusted, kappa).image),
+    ]
+    print(f"components' measured noise {noise:.3f} → noise-reduction radius {size} (app.model.noise.denoise_radius)")
+    print(f"{'method':<40} {'against':<10} " + " ".join(f"{name:>9}" for name in regions)
+          + "  (edge pixels' share of the image's squared error)")
+    for label, img in rows:
+        for name, truth in (("one truth", truths[0]), ("reference", reference)):
+            print(f"{label:<40} {name:<10} "
+                  + " ".join(f"{100 * relative_error(img, truth, m):8.2f}%" for m in regions.values())
+                  + f"  ({100 * _edge_share(img, truth, keep, edge):.0f}%)", flush=True)
+    print(f"wall: {wall.sum()} pixels ({edge.sum()} edge), times: "
+          + ", ".join(f"{k} {v:.0f} s" for k, v in exp.seconds.items()), flush=True)
 
 
 def part_ratio(args):
@@ -649,6 +817,7 @@ PARTS = {
     "posed": part_posed,
     "realistic": part_realistic,
     "fig13": part_fig13,
+    "fig13spp": part_fig13_samples,
     "fig3": part_fig3,
     "fig12": part_fig12,
 }
@@ -664,6 +833,12 @@ def main(argv=None) -> int:
                         help="camera pixels a side for cornell (default 64), virtual (128) and edge (48)")
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--fig13-spp", type=int, default=512, help="samples per pixel of fig13's captures")
+    parser.add_argument("--fig13-spp-sweep", type=int, nargs="+", default=[512, 2048, 4096],
+                        help="samples per pixel of fig13spp's captures, one cell each")
+    parser.add_argument("--fig12-spp", type=int, nargs="+", default=[1024],
+                        help="samples per pixel of fig12's path-traced captures and truth, one run each")
+    parser.add_argument("--fig12-truths", type=int, default=8,
+                        help="truth renders averaged into fig12's reference (even)")
     args = parser.parse_args(argv)
     for part in args.parts:
         t = time.perf_counter()
