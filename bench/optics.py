@@ -245,8 +245,6 @@ def part_noise(args):
     rig.close()
     wall, interior = cov_true > 0, interior_of(cov_true)
     edge, keep = wall & ~interior, ~lamp
-    if not radius:
-        return _decomposition(acq, 0)
     t, obs = acq.target, acq.observations
     d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
     filtered = denoise_components(d0, obs[0], radius=4)
@@ -679,7 +677,9 @@ def part_fig12(args):
     difference of its two halves). Variants: naive, the previous behaviour (hard mask), the
     soft mask refined from the photograph without noise reduction, with noise reduction sized
     from the measured noise as the app and ``albedit demo`` size it
-    (:func:`app.model.noise.denoise_radius`), and the noise-aware recolor (:mod:`engine.trust`)
+    (:func:`app.model.noise.denoise_radius`; on every pixel, on the wall only, and on the
+    decomposition weighted by the captures' covariance as the app decomposes), and the
+    noise-aware recolor (:mod:`engine.trust`)
     with each capture's Monte Carlo variance (:attr:`engine.rig.Frame.variance`) in its
     covariance.
     """
@@ -755,6 +755,8 @@ def _fig12_table(exp: Experiment, kappa, n_truths: int, keep) -> None:
         ("soft mask, refined", recolor(d, kappa)),
         (f"soft refined, denoise {size} (measured)", recolor(_decomposition(soft, size), kappa)),
         (f"soft refined, denoise {size}, wall only", recolor(_denoised_on_target(soft, size), kappa)),
+        (f"soft, weighted, denoise {size} (the app's)", recolor(
+            soft.target.decompose(soft.observations, covariance=soft.covariance, denoise=size), kappa)),
         ("soft refined, noise-aware (MC var.)", recolor_trusted(trusted, kappa).image),
     ]
     print(f"components' measured noise {noise:.3f} → noise-reduction radius {size} (app.model.noise.denoise_radius)")
