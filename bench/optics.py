@@ -37,8 +37,8 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
 * ``fig3`` — a diffuse box on a glossy floor (``mitsuba:floor``): the box's reflection.
 * ``fig12`` — a textured target (``virtual:textured``, then ``mitsuba:textured`` at each
   ``--fig12-spp``), κ = (2, 0.125, 1.2), against one truth render and against the mean of
-  ``--fig12-truths``; the soft mask plain, with noise reduction sized from the measured noise,
-  and noise-aware.
+  ``--fig12-truths``; the soft mask (refined, or the true coverage: ``--fig12-masks``) plain,
+  with noise reduction sized from the measured noise, and noise-aware.
 * ``ratio`` — interreflection-to-direct ratio on the Cornell right wall (ceiling light, projector white):
   the virtual rig's radiosity at several patch sizes against Mitsuba's path tracer.
 
@@ -693,8 +693,14 @@ def part_fig12(args):
         print(f"\n== Fig. 12: mitsuba:textured {res}², {spp} spp (captures and truth), textured target, "
               f"κ = {kappa.tolist()}, order 4 ==")
         exp = Experiment(rig, "checker_wall", 4, cal_spp=64, spp=spp)
-        exp.acquire("hard", exp.hard)
-        exp.acquire("soft", refine_mask(exp.hard, exp.photograph()))
+        if "hard" in args.fig12_masks:
+            exp.acquire("hard", exp.hard)
+        if "soft" in args.fig12_masks:
+            photo = exp.photograph() if exp._acq else exp.rec.capture(
+                "photograph", exp.rec.black() if exp.flood is None else exp.flood)
+            exp.acquire("soft", refine_mask(exp.hard, photo))
+        if "true" in args.fig12_masks:
+            exp.acquire("true", exp.coverage)
         _fig12_table(exp, kappa, args.fig12_truths, ~rig.truth.emitters())
         rig.close()
 
@@ -745,21 +751,26 @@ def _fig12_table(exp: Experiment, kappa, n_truths: int, keep) -> None:
     print("  " + ", ".join(f"{name} {100 * relative_error(truths[1], truths[0], m):.2f} / "
                            f"{100 * relative_error(first, second, m) / 2:.2f}%" for name, m in regions.items()))
     photo = exp.photograph()
-    soft = exp._acq["soft"]
-    d = soft.target.decompose(soft.observations)
-    size, noise = denoise_radius(d)
-    trusted = soft.target.trust(soft.observations, soft.covariance)
-    rows = [
-        ("naive per-pixel", np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo)),
-        ("previous (hard mask)", recolor(_decomposition(exp._acq["hard"], 0), kappa)),
-        ("soft mask, refined", recolor(d, kappa)),
-        (f"soft refined, denoise {size} (measured)", recolor(_decomposition(soft, size), kappa)),
-        (f"soft refined, denoise {size}, wall only", recolor(_denoised_on_target(soft, size), kappa)),
-        (f"soft, weighted, denoise {size} (the app's)", recolor(
-            soft.target.decompose(soft.observations, covariance=soft.covariance, denoise=size), kappa)),
-        ("soft refined, noise-aware (MC var.)", recolor_trusted(trusted, kappa).image),
-    ]
-    print(f"components' measured noise {noise:.3f} → noise-reduction radius {size} (app.model.noise.denoise_radius)")
+    rows = [("naive per-pixel", np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo))]
+    if "hard" in exp._acq:
+        rows.append(("previous (hard mask)", recolor(_decomposition(exp._acq["hard"], 0), kappa)))
+    for name, mask in (("soft", "refined"), ("true", "true coverage")):
+        if name not in exp._acq:
+            continue
+        acq = exp._acq[name]
+        d = acq.target.decompose(acq.observations)
+        size, noise = denoise_radius(d)
+        print(f"{mask}: components' measured noise {noise:.3f} → noise-reduction radius {size} "
+              "(app.model.noise.denoise_radius)")
+        rows += [
+            (f"soft {mask}", recolor(d, kappa)),
+            (f"{mask}, denoise {size} (measured)", recolor(_decomposition(acq, size), kappa)),
+            (f"{mask}, denoise {size}, wall only", recolor(_denoised_on_target(acq, size), kappa)),
+            (f"{mask}, weighted, denoise {size} (app)", recolor(
+                acq.target.decompose(acq.observations, covariance=acq.covariance, denoise=size), kappa)),
+            (f"{mask}, noise-aware (MC variance)", recolor_trusted(
+                acq.target.trust(acq.observations, acq.covariance), kappa).image),
+        ]
     print(f"{'method':<40} {'against':<10} " + " ".join(f"{name:>9}" for name in regions)
           + "  (edge pixels' share of the image's squared error)")
     for label, img in rows:
@@ -839,6 +850,9 @@ def main(argv=None) -> int:
                         help="samples per pixel of fig13spp's captures, one cell each")
     parser.add_argument("--fig12-spp", type=int, nargs="+", default=[1024],
                         help="samples per pixel of fig12's path-traced captures and truth, one run each")
+    parser.add_argument("--fig12-masks", nargs="+", choices=["hard", "soft", "true"], default=["hard", "soft"],
+                        help="fig12's path-traced acquisitions: hard mask (the previous behaviour), soft mask "
+                             "refined from the photograph, the rig's true coverage")
     parser.add_argument("--fig12-truths", type=int, default=8,
                         help="truth renders averaged into fig12's reference (even)")
     args = parser.parse_args(argv)
