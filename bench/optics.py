@@ -484,13 +484,14 @@ def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibration
     fireflies are no peak; :meth:`devices.mitsuba.truth.Truth.components`, rendered at ``spp``),
     averaged over the four. ``extra`` (with ``components``) adds ``paper_floor`` (the metric of a
     second truth components render against the first: the metric's own Monte Carlo noise at
-    ``spp``), ``paper_ref`` (ours against the mean of the two renders), ``radius`` (noise
-    reduction sized from the measured noise, :func:`app.model.noise.denoise_radius`, as the
-    app and ``albedit demo`` size it) with ``paper_dn`` / ``paint_dn`` / ``every_dn`` (the
-    same, noise-reduced with that radius; the metric against the first render), ``paper_w``
-    (the decomposition weighted by the captures' covariance, Monte Carlo variance included), and
-    ``paint_trust`` / ``every_trust`` (the noise-aware recolor, :mod:`engine.trust`, with each
-    capture's Monte Carlo variance in its covariance).
+    ``spp``; ``floor_each`` and ``paper_each`` per component), ``paper_ref`` (ours against the
+    mean of the two renders), ``radius`` (noise reduction sized from the measured noise,
+    :func:`app.model.noise.denoise_radius`, as the app and ``albedit demo`` size it) with
+    ``paper_dn`` / ``paint_dn`` / ``every_dn`` (the same, noise-reduced with that radius; the
+    metric against the first render), ``paper_w`` (the decomposition weighted by the captures'
+    covariance, Monte Carlo variance included), and ``paint_trust`` / ``every_trust`` (the
+    noise-aware recolor, :mod:`engine.trust`, with each capture's Monte Carlo variance in its
+    covariance).
     """
     rig = devices.open_rig("mitsuba:wedge", ideal=True, resolution=(res, res), spp=spp, truth_spp=4 * spp,
                            specular=share, roughness=alpha, projector=pose)
@@ -529,6 +530,8 @@ def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibration
             true2 = c2.inside + c2.outside
             out["paper_floor"] = _paper_metric(true2, true, peaks)
             out["paper_ref"] = _paper_metric(d.components, (true + true2) / 2, peaks)
+            out["paper_each"] = _paper_metric(d.components, true, peaks, each=True)
+            out["floor_each"] = _paper_metric(true2, true, peaks, each=True)
             size = denoise_radius(d)[0]
             dn = acq.target.decompose(acq.observations, denoise=size) if size else d
             out["radius"] = size
@@ -543,9 +546,11 @@ def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibration
     return out
 
 
-def _paper_metric(components, true, peaks) -> float:
-    """The paper's Fig. 13 metric: mean |error| of each component over the truth's peak, averaged."""
-    return float(np.mean([np.abs(components[i] - true[i]).mean() / peaks[i] for i in range(len(peaks))]))
+def _paper_metric(components, true, peaks, *, each=False):
+    """The paper's Fig. 13 metric: mean |error| of each component over the truth's peak, averaged
+    (``each``: the list of the components' own)."""
+    per = [float(np.abs(components[i] - true[i]).mean() / peaks[i]) for i in range(len(peaks))]
+    return per if each else float(np.mean(per))
 
 
 def _cell(e) -> str:
@@ -623,6 +628,9 @@ def part_fig13_samples(args):
                   + " ".join(f"{100 * e[k]:6.2f}" for k in ("every", "every_dn", "every_trust")) + " | "
                   + " ".join(f"{100 * e[k]:6.2f}" for k in ("paint", "paint_dn", "paint_trust"))
                   + f" | {100 * e['naive']:6.2f} ({100 * e['floor']:5.2f}) {time.perf_counter() - t:5.0f}s", flush=True)
+            print(f"{'':18} per component, ours / floor: " + ", ".join(
+                f"{100 * a:.2f} / {100 * b:.2f}" for a, b in zip(e["paper_each"], e["floor_each"], strict=True)),
+                flush=True)
 
 
 def part_fig3(args):
