@@ -83,11 +83,11 @@ def demo_resolution(canvas: tuple[int, int]) -> tuple[int, int]:
 
 def demo_key(rig_name: str, rig, options: dict) -> str:
     """Names one demo set-up: scene content, camera model, resolution, pose, seed, the demo's plan."""
-    from devices.virtual.setup import MODEL_VERSION
+    from devices.virtual.setup import MODEL_DIGEST
     from engine.workflow import rig_metadata
 
     blob = json.dumps({"rig": rig_name, "scene": getattr(getattr(rig, "scene", None), "digest", ""),
-                       "model": MODEL_VERSION, "options": {k: options[k] for k in sorted(options)},
+                       "model": MODEL_DIGEST, "options": {k: options[k] for k in sorted(options)},
                        "camera": list(rig.camera.resolution), "projector": list(rig.projector.resolution),
                        "target": DEMO_TARGET, "order": DEMO_ORDER,
                        # what its session records about the rig (a session made before it recorded the projector's
