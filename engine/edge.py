@@ -11,7 +11,8 @@ target or as non-target leaves a seam along every edge. Here the target is a *so
 * pixels with 0 < α < 1 (*edge*) are not re-emitted; their light — measured by the
   re-emissions around it, the target's part one interaction late — is split into the target's
   part (the target's components extrapolated to the strip of it in the pixel) and the
-  neighbour's (the rest): :func:`blend_edges`;
+  neighbour's (the rest): :func:`blend_edges`; under noise, the neighbour's interaction shares
+  are fitted along the edge, where they vary slowly (its ``along``);
 * the emitted pixels next to the edge also emit the edge's target part (:func:`stand_in`), so
   that the observations hold about the interreflections of the whole target Eq. 6 assumes;
 * a soft mask comes from the rig's true coverage, or from the artist's hard mask refined along the
@@ -252,8 +253,8 @@ def blend_edges(
         least biased near concave corners, where shares change fast).
     along : int
         Noise reduction along the edge: the neighbour's interaction shares of each blended
-        pixel are averaged over the blended pixels within this many pixels (square window)
-        whose edge faces the same way (:func:`_along_edge`); 0 (the default) leaves every
+        pixel are fitted to the blended pixels within this many pixels (square window)
+        whose edge faces the same way (least squares, below); 0 (the default) leaves every
         pixel's own.
 
     Returns
@@ -290,6 +291,10 @@ def blend_edges(
     (dark outside pixels count: against the void, ``w = 1``):
     ``w = α Ī_A / (α Ī_A + (1 − α) Ī_N)`` per channel; the target part is the rest of ``F``
     (clipped at 0). ``F`` is first scaled to sum to ``I``, so κ = 1 gives ``I`` exactly.
+    With ``along``, the neighbour's part keeps its total but takes the shares
+    ``s_j = Σ_q T(q) part_j(q) / Σ_q T(q)²`` of the blended pixels q near it along the edge
+    (``T`` the neighbour part's light; :func:`_along_edge`): its noise is the noisiest
+    observations' (an edge pixel is not re-emitted), multiplied by ``κ^{m+1}``.
     Recoloring multiplies the target part's ``L̄_d`` by κ and its ``C R^m L_d`` by
     ``κ^{m+2}`` (Eq. 3), the neighbour's as Eq. 4. The target part's K-th interaction
     (beyond the K-1 outside components) is not represented.
