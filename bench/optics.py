@@ -161,12 +161,12 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
                 )
             )
     print(
-        f"{'κ':>20} {'method':<34} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} "
+        f"{'κ':>20} {'method':<48} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} "
         f"{'noise floor':>11}"
     )
     for k, label, e_wall, e_in, ratio, e_edge, e_img, floor in rows:
         print(
-            f"{str(k):>20} {label:<34} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {ratio:6.2f} {100 * e_edge:7.2f}% "
+            f"{str(k):>20} {label:<48} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {ratio:6.2f} {100 * e_edge:7.2f}% "
             f"{100 * e_img:7.2f}% {100 * floor:10.2f}%"
         )
     print(
