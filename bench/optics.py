@@ -333,6 +333,9 @@ def part_realistic(args):
         d = acq.target.decompose(acq.observations)
         size = denoise_radius(d)[0]
         rows.append((label, recolor(_decomposition(acq, size), K2), size))
+        if name in ("soft", "true") and size:  # the previous behaviour: edge not fitted along the edge
+            rows.append(("  the same, not fitted along edge", recolor(_decomposition(acq, size, previous="square"), K2),
+                         size))
     print(f"{'method':<34} {'surfaces':>8} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'denoise':>7}")
     for label, img, size in rows:
         e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
