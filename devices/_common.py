@@ -1,4 +1,4 @@
-"""Small helpers shared by the real camera backends: bounded device calls and option checks.
+"""Small helpers shared by the device backends: bounded device calls, option checks, cache keys.
 
 Vendor libraries block inside C calls that no Python timeout can interrupt. :func:`call_with_timeout`
 runs such a call on a daemon thread and gives up waiting after a deadline, so the caller gets a
@@ -8,9 +8,11 @@ must refuse further calls until it finishes (see :class:`Watchdog`).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from engine.errors import DeviceError, InputError
@@ -111,3 +113,32 @@ def cache_folder(option, default: Callable[[], Any]):
     if not isinstance(option, (str, os.PathLike)):
         raise InputError(f"cache_dir must be a path, None or False, got {option!r}")
     return option
+
+
+def source_digest(package: Path) -> str:
+    """Digest of the Python source of one package folder, for keying caches of what that code computes.
+
+    A cache keyed by a hand-bumped version number is read by any code that carries the same
+    number, including code restored by a revert after the number moved on; a cache keyed by the
+    source itself is read only by the code that wrote it. Any edit (a docstring too) costs one
+    rebuild, which is what a cache is for.
+
+    Parameters
+    ----------
+    package : Path
+        Folder whose ``*.py`` files (not sub-folders) make up the computation.
+
+    Returns
+    -------
+    str
+        16 hex digits.
+
+    Examples
+    --------
+    >>> len(source_digest(Path(__file__).parent))
+    16
+    """
+    digest = hashlib.sha256()
+    for path in sorted(Path(package).glob("*.py")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]

@@ -4,7 +4,8 @@ Calibrates the virtual co-axial rig — by default the same one the desktop app'
 (:data:`app.model.demo.DEMO_OPTIONS`: the ideal camera and projector, where every number can
 be checked exactly; ``--realistic`` adds noise, gamma, black level and an 8-bit projector) —
 captures the right wall's observations, decomposes, recolors it from green to blue
-(κ = (2, 0.125, 8), the paper's Fig. 6) and writes the recolored EXR, a PNG preview, the
+(κ = (2, 0.125, 8), the paper's Fig. 6; another scene's target gets the κ that gives it the same
+blue, :func:`app.model.demo.demo_kappa`) and writes the recolored EXR, a PNG preview, the
 ground-truth PNG and a false-colour error image. ``--rig mitsuba:cornell`` runs the same on the
 path-traced rig (Mitsuba 3; 64² by default, ``--spp`` samples per pixel per capture, one frame
 per capture).
@@ -32,7 +33,7 @@ import numpy as np
 
 from app.cli._args import frames, kappa, order, radius, resolution
 from app.cli.main import ProgressBar
-from app.model.demo import DEMO_KAPPA, DEMO_OPTIONS, DEMO_ORDER, DEMO_TARGET, refined_target
+from app.model.demo import DEMO_OPTIONS, DEMO_ORDER, DEMO_TARGET, demo_kappa, refined_target
 from app.model.files import export_image, open_document, prepare_trusted, recolored_image
 from app.model.noise import SKIP_BELOW, denoise_radius
 from engine.acquire import Adaptive
@@ -68,8 +69,9 @@ def add_arguments(parser) -> None:
                         help="mitsuba rig: samples per pixel of each capture's render (default %(default)s)")
     parser.add_argument("--target", help=f"scene target to recolor (default {DEMO_TARGET}, or the scene's first "
                                           "target when it has none)")
-    parser.add_argument("--kappa", type=kappa, default=np.array(DEMO_KAPPA), metavar="R,G,B",
-                        help="albedo scale (default 2,0.125,8: the paper's Fig. 6)")
+    parser.add_argument("--kappa", type=kappa, default=None, metavar="R,G,B",
+                        help="albedo scale (default: the paper's Fig. 6 blue, 2,0.125,8 on the Cornell box's green "
+                             "wall; on another target the κ that gives it the same albedo, (0.2, 0.1, 0.8))")
     parser.add_argument("--order", type=order, default=DEMO_ORDER, help="decomposition order K (default %(default)s)")
     parser.add_argument("--resolution", type=resolution, default=None,
                         help="camera resolution (default 128, 64 on the mitsuba rig)")
@@ -132,6 +134,8 @@ def run(args) -> int:
         if target not in rig.targets:
             raise InputError(f"scene {scene!r} has no target {target!r}; it has {sorted(rig.targets)}")
         mask = rig.targets[target]
+        if args.kappa is None:
+            args.kappa = demo_kappa(rig, mask)
         if (session_path / "manifest.json").exists():
             session = Session.open(session_path)
             session.recover_orphans()
@@ -143,8 +147,8 @@ def run(args) -> int:
         kind = ("ideal" if args.ideal else "realistic") + (" path-traced" if path_traced else "")
         print(f"calibrating {rig.name} ({kind}, {args.projector}) ...", file=sys.stderr)
         run_calibration(rig, session, progress=ProgressBar())
-        print(f"capturing target {target!r} at order {args.order}, {frames} frame(s) per capture ...",
-              file=sys.stderr)
+        print(f"capturing target {target!r} at order {args.order}, {frames} frame(s) per capture, to recolor it "
+              f"with κ = ({', '.join(f'{k:g}' for k in args.kappa)}) ...", file=sys.stderr)
         refine = args.edge == "refine" or (args.edge == "auto" and (path_traced or not args.ideal))
         painted = refined_target(rig, session, mask, frames=frames) if refine else mask
         result = run_capture(

@@ -37,6 +37,8 @@ DEMO_RIG = "virtual:cornell"
 #: The target acquired in the demo and its κ (paper, Fig. 6: green (0.1, 0.8, 0.1) → blue (0.2, 0.1, 0.8)).
 DEMO_TARGET = "right_wall"
 DEMO_KAPPA = (2.0, 0.125, 8.0)
+#: The albedo the demo gives its target: Fig. 6's blue (:func:`demo_kappa`).
+DEMO_ALBEDO = (0.2, 0.1, 0.8)
 DEMO_ORDER = 4
 #: The one default rig of the app's and the CLI's demo: ideal, co-axial, seeded.
 DEMO_OPTIONS: dict[str, Any] = {"ideal": True, "projector": "coaxial", "seed": 0}
@@ -81,13 +83,43 @@ def demo_resolution(canvas: tuple[int, int]) -> tuple[int, int]:
     return (s, s)
 
 
+def demo_kappa(rig, mask: np.ndarray) -> np.ndarray:
+    """κ that gives the demo's target Fig. 6's blue (:data:`DEMO_ALBEDO`), from the rig's true albedo.
+
+    On the Cornell box's green right wall this is Fig. 6's κ, :data:`DEMO_KAPPA`. Fig. 6's κ on
+    another wall can ask for an albedo no surface has (the checker scene's blue wall, albedo 0.6
+    in blue, would get 4.8: more light than it receives, whose interaction series an order-K
+    decomposition cannot follow), so the demo aims at the colour, not the factor.
+
+    Parameters
+    ----------
+    rig
+        A rig whose ``truth`` may offer ``albedo()``, (H, W, 3) per pixel.
+    mask : (H, W) bool
+        The target.
+
+    Returns
+    -------
+    (3,) float64
+        The target's mean true albedo divided into :data:`DEMO_ALBEDO`, to three decimals;
+        :data:`DEMO_KAPPA` when the rig does not know its albedo (the path-traced rigs).
+    """
+    albedo_of = getattr(rig.truth, "albedo", None)
+    if albedo_of is None:
+        return np.array(DEMO_KAPPA)
+    albedo = np.asarray(albedo_of(), np.float64)[np.asarray(mask, bool)].mean(axis=0)
+    if not np.all(albedo > 0):
+        return np.array(DEMO_KAPPA)
+    return np.round(np.array(DEMO_ALBEDO) / albedo, 3)
+
+
 def demo_key(rig_name: str, rig, options: dict) -> str:
     """Names one demo set-up: scene content, camera model, resolution, pose, seed, the demo's plan."""
-    from devices.virtual.setup import MODEL_VERSION
+    from devices.virtual.setup import MODEL_DIGEST
     from engine.workflow import rig_metadata
 
     blob = json.dumps({"rig": rig_name, "scene": getattr(getattr(rig, "scene", None), "digest", ""),
-                       "model": MODEL_VERSION, "options": {k: options[k] for k in sorted(options)},
+                       "model": MODEL_DIGEST, "options": {k: options[k] for k in sorted(options)},
                        "camera": list(rig.camera.resolution), "projector": list(rig.projector.resolution),
                        "target": DEMO_TARGET, "order": DEMO_ORDER,
                        # what its session records about the rig (a session made before it recorded the projector's
@@ -213,7 +245,7 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
                 doc.set_included(t.uid, False)  # painted for reference, not measured
         t = doc.add_target(DEMO_TARGET, targets[DEMO_TARGET])
         doc.set_acquisition([t.uid], decomposition, key=key)
-        doc.set_kappa(t.uid, DEMO_KAPPA)
+        doc.set_kappa(t.uid, demo_kappa(rig, targets[DEMO_TARGET]))
         _finish(doc)
         report(progress, 1, 1, "ready")
         return Demo(doc, rig, session, saved)

@@ -21,13 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
+from devices._common import source_digest
 from engine.errors import InputError
 from engine.progress import report
 
 # Samples per pixel per Mitsuba call (progress is reported between calls).
 CHUNK_SPP = 256
-# Bump when what a cached ambient image means changes.
-MODEL_VERSION = 1
+#: What a cached ambient image means: a digest of this package's source.
+MODEL_DIGEST = source_digest(Path(__file__).parent)
 # Seeds of truth renders start here (captures count up from the rig's seed).
 TRUTH_SEEDS = 1 << 30
 
@@ -304,7 +305,7 @@ class Renderer:
                 "spp": self.ambient_spp,
                 "depth": self.max_depth,
                 "materials": self.materials,
-                "version": MODEL_VERSION,
+                "model": MODEL_DIGEST,
                 "mitsuba": mi.__version__,
             },
             sort_keys=True,

@@ -30,11 +30,12 @@ the arrays every capture reuses:
   whose pixels all emit the same flux.
 
 Arrays are stored as ``.npz`` (never pickle), keyed by a hash of the scene file's content,
-the options that change geometry and :data:`MODEL_VERSION`; a missing or corrupt cache file
-is rebuilt, and deleting the cache directory is always safe.
+the options that change geometry and :data:`MODEL_DIGEST` (the virtual rig's source: a cache
+written by other code, even code a revert brings back, is never read); a missing or corrupt
+cache file is rebuilt, and deleting the cache directory is always safe.
 
 Over 500 lines on purpose: geometry sampling, the radiosity solve and the set-up cache are one
-versioned computation (:data:`MODEL_VERSION` covers all three).
+computation (:data:`MODEL_DIGEST` covers all three).
 """
 
 from __future__ import annotations
@@ -48,13 +49,15 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from devices._common import source_digest
 from devices.virtual.geometry import Quads, View, blocker_table, cast_rays, occluded, polygon_form_factor, quad_corners
 from devices.virtual.scene import Scene
 from engine.errors import InputError
 from engine.imageio import atomic_write
 from engine.progress import report
 
-MODEL_VERSION = 11  # not 10: a reverted set-up (2b6a7e7) left version-10 caches behind
+#: The virtual rig's model: a digest of this package's source (set-up, sampling, rendering).
+MODEL_DIGEST = source_digest(Path(__file__).parent)
 #: Most patches a scene may be cut into: their transport is dense in patches (memory ~ patches²).
 MAX_PATCHES = 8000
 
@@ -245,7 +248,7 @@ def load_or_build(scene: Scene, geometry: Geometry, cache_dir: Path | None, *, p
     """
     if cache_dir is None:
         return build(scene, geometry, progress=progress)
-    common = {"scene": scene.digest, "patch_size": repr(float(geometry.patch_size)), "version": MODEL_VERSION,
+    common = {"scene": scene.digest, "patch_size": repr(float(geometry.patch_size)), "model": MODEL_DIGEST,
               "samples": [VIS_SAMPLES, LIGHT_SAMPLES, HIDDEN_PER_PATCH]}
     ff_key = _key(common)
     key = _key(dict(common, resolution=list(geometry.resolution), projector=geometry.projector,
@@ -271,7 +274,7 @@ def _key(obj) -> str:
 
 def _save_arrays(path: Path, arrays: dict) -> None:
     """Write ``arrays`` to ``path`` atomically (:func:`engine.imageio.atomic_write`); failures only cost time."""
-    arrays = dict(arrays, version=np.array(MODEL_VERSION))
+    arrays = dict(arrays, model=np.array(MODEL_DIGEST))
 
     def writer(temp: Path) -> None:
         with open(temp, "wb") as fh:
@@ -290,7 +293,7 @@ def _load_arrays(path: Path, names) -> dict | None:
         return None
     try:
         with np.load(path, allow_pickle=False) as z:
-            if int(z["version"]) != MODEL_VERSION:
+            if str(z["model"]) != MODEL_DIGEST:
                 return None
             return {n: z[n] for n in names}
     except Exception:  # corrupt, truncated or foreign file: rebuild

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -336,3 +337,22 @@ def test_emitters_are_the_pixels_that_see_the_lamp(cache):
         assert photo[lamp].min() > 2 * photo[~lamp].max()  # brighter than any lit surface
     with open_rig("wedge", ideal=True, resolution=(32, 32), cache_dir=cache) as rig:
         assert not rig.truth.emitters().any()  # the wedge is lit by the projector's flood only
+
+
+def test_setup_cache_written_by_other_code_is_never_read(tmp_path, monkeypatch):
+    """A cache is keyed by the rig's source, not a version number a revert could bring back."""
+    import devices.virtual.setup as setup_module
+    from devices._common import source_digest
+
+    assert setup_module.MODEL_DIGEST == source_digest(Path(setup_module.__file__).parent)
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "a.py").write_text("x = 1\n")
+    before = source_digest(tmp_path / "pkg")
+    (tmp_path / "pkg" / "a.py").write_text("x = 2\n")
+    assert source_digest(tmp_path / "pkg") != before
+    cache = tmp_path / "cache"
+    open_rig("wedge", ideal=True, resolution=(16, 16), cache_dir=cache, patch_size=0.3)
+    assert len(list(cache.glob("*.npz"))) == 2
+    monkeypatch.setattr(setup_module, "MODEL_DIGEST", "0" * 16)  # other code: its own files
+    open_rig("wedge", ideal=True, resolution=(16, 16), cache_dir=cache, patch_size=0.3)
+    assert len(list(cache.glob("*.npz"))) == 4

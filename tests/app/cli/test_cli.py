@@ -57,10 +57,19 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
 
 
 def test_demo_on_another_scene_recolors_its_first_target_and_warns_when_the_order_cannot_follow(tmp_path):
-    # the checker scene has a blue right wall (B albedo 0.6): the demo's κ_B = 8 asks for more than order 4 holds
+    # the checker scene's right wall is blue, albedo (0.15, 0.25, 0.6): the demo gives it Fig. 6's blue
+    # (0.2, 0.1, 0.8), not Fig. 6's κ, which would make its albedo 4.8 in B
     result = _run("demo", "-o", str(tmp_path / "c"), "--scene", "checker", "--resolution", "40")
     assert result.returncode == 0, result.stderr
-    assert "capturing target 'right_wall'" in result.stderr
+    assert "capturing target 'right_wall'" in result.stderr and "κ = (1.333, 0.4, 1.333)" in result.stderr
+    assert "warning" not in result.stderr, result.stderr
+    ours, naive = map(float, re.search(r"Albedit ([0-9.]+) %, naive per-pixel recolor ([0-9.]+) %",
+                                       result.stdout).groups())
+    assert ours < 0.5 and naive > 10 * ours  # measured 0.07 / 2.71 %
+    # Fig. 6's κ asked for explicitly: more than order 4 holds, and said so
+    result = _run("demo", "-o", str(tmp_path / "c"), "--scene", "checker", "--resolution", "40",
+                  "--kappa", "2,0.125,8")
+    assert result.returncode == 0, result.stderr
     assert "albedit demo: warning: the recolor has not converged at order 4" in result.stderr, result.stderr
     # a scene without a right wall: its first target, named, instead of an error
     result = _run("demo", "-o", str(tmp_path / "t"), "--scene", "textured", "--resolution", "16",
