@@ -518,7 +518,9 @@ def _along_edge(part, cov, ys, xs, radius: int) -> np.ndarray:
     num = np.zeros((k, n, c))
     den = np.zeros((n, c))
     for b in range(8):
-        weight = sum(np.where(idx == b, wt, 0) for idx, wt in bins).astype(np.float32)
+        weight = np.zeros(n, np.float32)
+        for idx, wt in bins:
+            weight += np.where(idx == b, wt, 0).astype(np.float32)
         if not weight.any():
             continue
         for j in range(-1, k):
