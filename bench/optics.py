@@ -6,10 +6,11 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
 * ``cornell`` — path-traced Cornell box (``mitsuba:cornell``), the right wall painted as the
   rig's hard mask (pixels at least half wall), order 4: error over the wall *with* its edge
   pixels against its interior, for κ = (0.5, 1.2, 0.8) and the paper's (2, 0.125, 8) with
-  noise reduction (before the edge blend; beside it the previous order, the blended
-  decomposition filtered), and the whole image against the render's own noise floor (two
-  independent truth renders). "soft" refines the hard mask from the photograph
-  (:func:`engine.edge.refine_mask`); "soft (true coverage)" uses the rig's exact coverage.
+  noise reduction (before the edge blend, the edge pixels' neighbour shares fitted along the
+  edge; beside it the previous behaviours, not fitted and the blended decomposition filtered),
+  and the whole image against the render's own noise floor (two independent truth renders).
+  "soft" refines the hard mask from the photograph (:func:`engine.edge.refine_mask`); "soft
+  (true coverage)" uses the rig's exact coverage.
 * ``noise`` — the same box, κ = (2, 0.125, 8): where its error comes from (noise reduction before or
   after the edge blend, the noise-aware recolor with and without the Monte Carlo variance).
 * ``virtual`` — the same on the supersampled ideal virtual Cornell box (128², 4×4), the true
@@ -67,8 +68,10 @@ import devices
 from app.model.noise import denoise_radius
 from engine.acquire import CaptureSettings, Recorder, acquire_single, calibrate_rig
 from engine.acquire.predict import relative_error
+from engine.decompose import decompose
 from engine.denoise import denoise_components
-from engine.edge import refine_mask
+from engine.edge import blend_edges, refine_mask
+from engine.fill import fill_unreachable
 from engine.recolor import recolor
 from engine.trust import recolor_trusted
 
@@ -124,11 +127,16 @@ class Experiment:
         return next(iter(self._acq.values())).observations[0]
 
 
-def _decomposition(acq, denoise, *, after=False):
-    """The acquisition's decomposition, noise-reduced with radius ``denoise`` (0: off) before the edge blend;
-    ``after``: the previous behaviour, the blended decomposition filtered."""
-    if after and denoise:
+def _decomposition(acq, denoise, *, previous=""):
+    """The acquisition's decomposition, noise-reduced with radius ``denoise`` (0: off) before the edge blend,
+    the edge pixels' neighbour shares fitted along the edge; ``previous``: an earlier behaviour, "after" the
+    blended decomposition filtered, "square" filtered before the blend but not fitted along the edge."""
+    if previous == "after" and denoise:
         return denoise_components(acq.target.decompose(acq.observations), acq.observations[0], radius=denoise)
+    if previous == "square" and denoise:
+        t, obs = acq.target, acq.observations
+        d = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
+        return blend_edges(denoise_components(d, obs[0], radius=denoise), t.coverage, obs[0])[0]
     return acq.target.decompose(acq.observations, denoise=denoise)
 
 
@@ -146,10 +154,11 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
         denoise = denoise_for(kappa)
         naive = np.where(exp.hard[:, :, None], photo * kappa.astype(np.float32), photo)
         results = [("naive per-pixel", naive)]
-        for label, name, *after in variants:  # ("label", "acquisition"[, "after": filter the blended one])
-            if after and not denoise:
+        for label, name, *previous in variants:  # ("label", "acquisition"[, an earlier behaviour: _decomposition])
+            if previous and not denoise:
                 continue
-            results.append((label, recolor(_decomposition(exp._acq[name], denoise, after=bool(after)), kappa)))
+            results.append((label, recolor(_decomposition(exp._acq[name], denoise, previous=(previous or [""])[0]),
+                                           kappa)))
         for label, img in results:
             e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
             rows.append(
@@ -165,12 +174,12 @@ def edge_table(exp: Experiment, variants, kappas, *, denoise_for, lamp, floor_tr
                 )
             )
     print(
-        f"{'κ':>20} {'method':<34} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} "
+        f"{'κ':>20} {'method':<48} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'image':>8} "
         f"{'noise floor':>11}"
     )
     for k, label, e_wall, e_in, ratio, e_edge, e_img, floor in rows:
         print(
-            f"{str(k):>20} {label:<34} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {ratio:6.2f} {100 * e_edge:7.2f}% "
+            f"{str(k):>20} {label:<48} {100 * e_wall:8.2f}% {100 * e_in:8.2f}% {ratio:6.2f} {100 * e_edge:7.2f}% "
             f"{100 * e_img:7.2f}% {100 * floor:10.2f}%"
         )
     print(
@@ -194,12 +203,14 @@ def part_cornell(args):
     err = np.abs(soft - exp.coverage)[(exp.coverage > 0) & (exp.coverage < 1)]
     print(f"refined coverage vs true coverage on edge pixels: mean |error| {err.mean():.3f}")
     variants = [("previous (hard mask)", "hard"), ("soft mask, refined", "soft"),
+                ("soft refined, not fitted along edge", "soft", "square"),
                 ("soft refined, filtered after blend", "soft", "after")]
     lamp = rig.truth.emitters()
     edge_table(exp, variants, [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     if not args.quick:
         exp.acquire("true", exp.coverage)
-        edge_table(exp, [("soft mask, true coverage", "true"), ("soft true, filtered after blend", "true", "after")],
+        edge_table(exp, [("soft mask, true coverage", "true"), ("soft true, not fitted along edge", "true", "square"),
+                         ("soft true, filtered after blend", "true", "after")],
                    [K1, K2], denoise_for=lambda k: 4 if np.max(k) > 2 else 0, lamp=lamp)
     rig.close()
 
@@ -210,7 +221,8 @@ def part_noise(args):
     One acquisition of the right wall refined into a soft mask (as ``cornell``), recolored with
     κ = (2, 0.125, 8) several ways, each against one truth render (the ``cornell`` table's metric)
     and against the mean of six (a reference with 1/√6 of a render's noise): no noise reduction,
-    the guided filter (radius 4) before the edge blend (now) and after it (before), before it
+    the guided filter (radius 4) before the edge blend (with the edge pixels' neighbour shares fitted
+    along the edge: now) and after it (before), before it
     but leaving the outside pixels (coverage 0) or everything but the target unfiltered; the
     noise-aware recolor (:mod:`engine.trust`) with each capture's Monte Carlo variance in the
     covariance (:attr:`engine.rig.Frame.variance`) and without it (the same captures read back
@@ -219,9 +231,6 @@ def part_noise(args):
     import tempfile
     from pathlib import Path
 
-    from engine.decompose import decompose
-    from engine.edge import blend_edges
-    from engine.fill import fill_unreachable
     from engine.session import Session
 
     res, spp = (32, 128) if args.quick else (args.resolution or 64, args.spp)
@@ -254,14 +263,15 @@ def part_noise(args):
     d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
     filtered = denoise_components(d0, obs[0], radius=4)
 
-    def blended(d, unfiltered=None):
+    def blended(d, unfiltered=None, along=0):
         if unfiltered is not None:
             d = _keep_measured(d, d0, unfiltered)
-        return recolor(blend_edges(d, t.coverage, obs[0])[0], K2)
+        return recolor(blend_edges(d, t.coverage, obs[0], along=along)[0], K2)
 
     rows = [
         ("no noise reduction", blended(d0)),
-        ("radius 4 before the edge blend (now)", blended(filtered)),
+        ("radius 4 before the edge blend", blended(filtered)),
+        ("the same, fitted along the edge (now)", blended(filtered, along=4)),
         ("radius 4 after the edge blend (before)", recolor(denoise_components(t.decompose(obs), obs[0], radius=4), K2)),
         ("radius 4 before, outside pixels unfiltered", blended(filtered, t.coverage <= 0)),
         ("radius 4 before, only the target filtered", blended(filtered, t.coverage < 1)),
@@ -293,10 +303,6 @@ def _keep_measured(filtered, measured, unfiltered):
 def _denoised_on_target(acq, radius):
     """The acquisition's decomposition noise-reduced before the edge blend, the outside pixels (coverage 0)
     left as measured (the filter's bias there is not worth its gain on a whole-image figure)."""
-    from engine.decompose import decompose
-    from engine.edge import blend_edges
-    from engine.fill import fill_unreachable
-
     if not radius:
         return _decomposition(acq, 0)
     t, obs = acq.target, acq.observations
@@ -356,6 +362,9 @@ def part_realistic(args):
         d = acq.target.decompose(acq.observations)
         size = denoise_radius(d)[0]
         rows.append((label, recolor(_decomposition(acq, size), K2), size))
+        if name in ("soft", "true") and size:  # the previous behaviour: edge not fitted along the edge
+            rows.append(("  the same, not fitted along edge", recolor(_decomposition(acq, size, previous="square"), K2),
+                         size))
     print(f"{'method':<34} {'surfaces':>8} {'wall+edge':>9} {'interior':>9} {'ratio':>6} {'edge':>8} {'denoise':>7}")
     for label, img, size in rows:
         e_wall, e_in = relative_error(img, truth, wall), relative_error(img, truth, interior)
@@ -376,8 +385,6 @@ def part_edge(args):
     """
     from math import comb
 
-    from engine.decompose import decompose
-    from engine.fill import fill_unreachable
 
     res, order, terms_n = args.resolution or (32 if args.quick else 48), 4, 12
     print(f"\n== the edge's cost, virtual:cornell {res}², supersampled 4×4, ideal, order {order}, true coverage; "

@@ -11,7 +11,8 @@ target or as non-target leaves a seam along every edge. Here the target is a *so
 * pixels with 0 < α < 1 (*edge*) are not re-emitted; their light — measured by the
   re-emissions around it, the target's part one interaction late — is split into the target's
   part (the target's components extrapolated to the strip of it in the pixel) and the
-  neighbour's (the rest): :func:`blend_edges`;
+  neighbour's (the rest): :func:`blend_edges`; under noise, the neighbour's interaction shares
+  are fitted along the edge, where they vary slowly (its ``along``);
 * the emitted pixels next to the edge also emit the edge's target part (:func:`stand_in`), so
   that the observations hold about the interreflections of the whole target Eq. 6 assumes;
 * a soft mask comes from the rig's true coverage, or from the artist's hard mask refined along the
@@ -232,7 +233,7 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
 
 
 def blend_edges(
-    decomposition: Decomposition, coverage, photograph, *, radius: int = 1
+    decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0
 ) -> tuple[Decomposition, np.ndarray]:
     """Recolor edge pixels: their target part as target, their neighbour's part as non-target.
 
@@ -250,6 +251,11 @@ def blend_edges(
         are blended; where the target does not line up with one, the neighbour's interaction
         shares and both sides' radiances come from that window (1 = the 8 neighbours, the
         least biased near concave corners, where shares change fast).
+    along : int
+        Noise reduction along the edge: the neighbour's interaction shares of each blended
+        pixel are fitted to the blended pixels within this many pixels (square window)
+        whose edge faces the same way (least squares, below); 0 (the default) leaves every
+        pixel's own.
 
     Returns
     -------
@@ -285,6 +291,10 @@ def blend_edges(
     (dark outside pixels count: against the void, ``w = 1``):
     ``w = α Ī_A / (α Ī_A + (1 − α) Ī_N)`` per channel; the target part is the rest of ``F``
     (clipped at 0). ``F`` is first scaled to sum to ``I``, so κ = 1 gives ``I`` exactly.
+    With ``along``, the neighbour's part keeps its total but takes the shares
+    ``s_j = Σ_q T(q) part_j(q) / Σ_q T(q)²`` of the blended pixels q near it along the edge
+    (``T`` the neighbour part's light; :func:`_along_edge`): its noise is the noisiest
+    observations' (an edge pixel is not re-emitted), multiplied by ``κ^{m+1}``.
     Recoloring multiplies the target part's ``L̄_d`` by κ and its ``C R^m L_d`` by
     ``κ^{m+2}`` (Eq. 3), the neighbour's as Eq. 4. The target part's K-th interaction
     (beyond the K-1 outside components) is not represented.
@@ -298,18 +308,20 @@ def blend_edges(
         raise InputError(f"photograph must have the decomposition's shape {(h, w, c)}, got {photo.shape}")
     if int(radius) < 1:
         raise InputError(f"radius must be >= 1 pixel, got {radius!r}")
+    if isinstance(along, bool) or not isinstance(along, (int, np.integer)) or along < 0:
+        raise InputError(f"along must be a whole number of pixels >= 0, got {along!r}")
     todo = edge(cov) & ~decomposition.target
     blended = np.zeros((h, w), bool)
     # edge pixels with no solid or no outside pixel that close (slivers) try a wider window
     for r in (int(radius), 3 * int(radius)):
         if not (todo & ~blended).any() or k < 2:
             break
-        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended)
+        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended, int(along))
         blended |= done
     return decomposition, blended
 
 
-def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Decomposition, np.ndarray]:
+def _blend(decomposition: Decomposition, cov, photo, r: int, mixed, along: int) -> tuple[Decomposition, np.ndarray]:
     """:func:`blend_edges` of the pixels ``mixed`` with a ``(2r+1)²`` window."""
     k, h, w, c = decomposition.components.shape
     none = np.zeros((h, w), bool)
@@ -368,6 +380,8 @@ def _blend(decomposition: Decomposition, cov, photo, r: int, mixed) -> tuple[Dec
     # than the pixel holds, so that the neighbour's part stays non-negative and κ = 1 gives I)
     target_part[:, found] = np.clip(strip[:, found], 0, np.maximum(own[:, found], 0))
     other = own - target_part
+    if along:
+        other = _along_edge(other, cov, fy, fx, along)
     packed = np.zeros((k, len(vy), c))
     packed[0] = target_part[0]  # the target part's direct light: κ^1
     for m in range(k - 1):
@@ -444,3 +458,80 @@ def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray]:
     found = count > 0
     part = alpha[None, :, None] * total / np.maximum(count, 1)[None, :, None]
     return part, found
+
+
+def _along_edge(part, cov, ys, xs, radius: int) -> np.ndarray:
+    """The neighbour's part of edge pixels with its interaction shares averaged along the edge.
+
+    Parameters
+    ----------
+    part : (K, N, C) float
+        The neighbour's part of edge pixels ``(ys, xs)``: index 0 its light the target did not
+        reach, ``1..K-1`` its ``C R^i L_d``.
+    cov : (H, W) float
+        Coverage.
+    ys, xs : (N,) int
+        The edge pixels.
+    radius : int
+        Half-size in pixels of the square window averaged over.
+
+    Returns
+    -------
+    (K, N, C) float64
+        Each pixel's own total ``T = Σ_j part_j`` (so κ = 1 is unchanged) divided in the shares
+        ``s_j = Σ_q w_pq T(q) part_j(q) / Σ_q w_pq T(q)²`` of the edge pixels q in the window,
+        with ``w_pq`` the overlap of the two pixels' edge orientations.
+
+    Notes
+    -----
+    An edge pixel is not re-emitted, so each of its observations is interreflected light only,
+    far noisier than the directly lit target's (a path tracer at 1024 spp: 2–15 % per capture
+    against 0.1–1 %), and the decomposition (Eq. 9) passes that noise to its components, which
+    recoloring multiplies by ``κ^{m+1}`` (Eq. 4). The neighbour's shares ``C R^m L_d / T`` of
+    its strip vary slowly along the edge, a curve, while they change across it: the edge pixels
+    of the window lie along the curve, so fitting one set of shares to them averages about
+    ``2 radius + 1`` pixels without reading the two surfaces' pixels on either side. ``s_j`` is
+    the least-squares slope of ``part_j`` against ``T`` over those pixels: a pixel with little
+    of the neighbour in it (coverage near 1) has shares that are mostly noise and counts little.
+    (Measured on the path-traced Cornell box, 64², 1024 spp, κ = (2, 0.125, 8), radius 4 after
+    noise reduction of radius 4: edge pixels 7.6 → 6.5 %; the plain mean of the shares gives
+    14 %, weights from each pixel's Monte Carlo variance 7.4 %.) The orientation — the
+    coverage's gradient, binned into 8 directions with linear weights, ``w_pq`` the sum over
+    bins of the product of the two pixels' weights: 1 for the same direction, 0 from 45° apart
+    — keeps the two edges that meet at a corner apart.
+    """
+    k, n, c = part.shape
+    h, w = cov.shape
+    rows = slice(max(int(ys.min()) - radius, 0), min(int(ys.max()) + radius + 1, h))
+    cols = slice(max(int(xs.min()) - radius, 0), min(int(xs.max()) + radius + 1, w))
+    py, px = ys - rows.start, xs - cols.start
+    local = np.ascontiguousarray(cov[rows, cols], np.float32)
+    gy = cv2.Sobel(local, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE)[py, px]
+    gx = cv2.Sobel(local, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE)[py, px]
+    turn = (np.arctan2(gy, gx) / (np.pi / 4)) % 8  # the direction the target lies in, in eighths of a turn
+    low = np.floor(turn).astype(int) % 8
+    frac = (turn - np.floor(turn)).astype(np.float32)
+    bins = [(low, 1 - frac), ((low + 1) % 8, frac)]
+    total = part.sum(axis=0)  # (N, C): T
+    size = (2 * radius + 1,) * 2
+    shape = (rows.stop - rows.start, cols.stop - cols.start)
+    num = np.zeros((k, n, c))
+    den = np.zeros((n, c))
+    for b in range(8):
+        weight = np.zeros(n, np.float32)
+        for idx, wt in bins:
+            weight += np.where(idx == b, wt, 0).astype(np.float32)
+        if not weight.any():
+            continue
+        for j in range(-1, k):
+            value = total * total if j < 0 else total * part[j]
+            for ch in range(c):
+                img = np.zeros(shape, np.float32)
+                img[py, px] = weight * value[:, ch]
+                got = cv2.boxFilter(img, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)[py, px] * weight
+                if j < 0:
+                    den[:, ch] += got
+                else:
+                    num[j, :, ch] += got
+    ok = den > 0
+    return np.where(ok[None], num / np.where(ok, den, 1.0)[None] * total[None], part)

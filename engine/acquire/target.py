@@ -109,7 +109,8 @@ class PreparedTarget:
         out); then, with ``denoise`` > 0, noise reduction of that radius in pixels
         (:func:`engine.denoise.denoise_components`, guided by the photograph); then, for a
         soft mask, :func:`engine.edge.blend_edges` recolors its edge pixels from both sides'
-        shares within ``edge_radius`` pixels.
+        shares within ``edge_radius`` pixels, with the neighbour's shares fitted along the edge
+        over ``denoise`` pixels (its ``along``).
 
         Notes
         -----
@@ -121,7 +122,10 @@ class PreparedTarget:
         pixels' own. On the path-traced Cornell box (``mitsuba:cornell``, 64², 1024 spp, the
         right wall refined into a soft mask, κ = (2, 0.125, 8), order 4, radius 4) the edge
         pixels' error is 7.9 % this way, against 19.1 % filtering the blended decomposition
-        and 12.0 % without noise reduction.
+        and 12.0 % without noise reduction. The guided filter reads an edge pixel's neighbours
+        in a square; its noise is reduced further along the edge, a curve, where the neighbour's
+        shares vary slowly: 6.5 % with that (the wall with its edge 3.57 → 3.19 %, 1.69 → 1.51× its
+        interior, on one acquisition).
         """
         photograph = np.asarray(observations)[0]
         d = decompose(observations, self.mask, unreached_light=unreached_light, covariance=covariance,
@@ -130,7 +134,7 @@ class PreparedTarget:
         if denoise:
             d = denoise_components(d, photograph, radius=denoise)
         if self.coverage is not None:
-            d = blend_edges(d, self.coverage, photograph, radius=edge_radius)[0]
+            d = blend_edges(d, self.coverage, photograph, radius=edge_radius, along=denoise)[0]
         return d
 
     def stand_in(self) -> np.ndarray | None:

@@ -28,8 +28,8 @@ __all__ = [
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
-DECOMPOSITION_VERSION = 4  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
-# 4: a soft mask is noise-reduced before its edge blend
+DECOMPOSITION_VERSION = 5  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
+# 4: a soft mask is noise-reduced before its edge blend; 5: and its edge pixels' neighbour shares along the edge
 
 
 def decomposition_key(session: Session) -> str:
