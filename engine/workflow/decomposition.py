@@ -28,8 +28,9 @@ __all__ = [
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
-DECOMPOSITION_VERSION = 5  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
-# 4: a soft mask is noise-reduced before its edge blend; 5: and its edge pixels' neighbour shares along the edge
+DECOMPOSITION_VERSION = 6  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
+# 4: a soft mask is noise-reduced before its edge blend; 5: and its edge pixels' neighbour shares along the edge;
+# 6: edge pixels against a void (or the frame's border) are wholly target
 
 
 def decomposition_key(session: Session) -> str:

@@ -225,3 +225,51 @@ def test_blend_edges_along_keeps_two_edges_of_a_corner_apart():
     away = col.copy()
     away[4:7, 4:7] = False  # the corner's pixels lie on both edges
     np.testing.assert_allclose(along[away], own[away], rtol=1e-4, atol=1e-6)
+
+
+def _textured_against_void(alpha):
+    """A checker-textured target (albedo ``A`` or ``A2`` pixel by pixel) beside a void (no surface, radiance 0).
+
+    Coverage ``alpha``; the rest of every pixel is void. Returns the decomposition (the edge pixels
+    decomposed as non-target: their target part one interaction late, Eq. 9), the photograph and the
+    recolor expected at κ = (2, 0.125, 8).
+    """
+    h, w = alpha.shape
+    s_in = np.array([0.7, 0.2, 0.1])
+    a2 = np.array([0.6, 0.3, 0.05], np.float32)
+    yy, xx = np.mgrid[:h, :w]
+    colour = np.where(((yy + xx) % 2 == 0)[:, :, None], A, a2) * alpha[:, :, None]
+    target = alpha >= 1
+    comps = (s_in[:, None, None, None] * colour[None]).astype(np.float32)
+    unreached = np.zeros((h, w, 3), np.float32)
+    col = edge(alpha)
+    unreached[col] = comps[0, col]  # L̄_d = R^0 L_d, C R^m L_d = R^{m+1} L_d
+    comps[0, col], comps[1, col], comps[2, col] = comps[1, col], comps[2, col], 0
+    kappa = np.array([2.0, 0.125, 8.0])
+    expected = colour * sum(kappa ** (i + 1) * s for i, s in enumerate(s_in))
+    return Decomposition(comps, unreached, target), colour.astype(np.float32), kappa, expected
+
+
+def test_blend_edges_takes_all_the_light_of_a_pixel_against_the_void_beyond_the_frame():
+    """A textured target fills the frame; its top row has coverage 0.94, the rest of it beyond the frame
+    (nothing the camera saw): no window holds an outside pixel, yet the row is blended, all its light as
+    the target's, and recolors exactly (it used to be left silently as non-target)."""
+    alpha = np.ones((10, 12), np.float32)
+    alpha[0] = 0.94
+    d, photo, kappa, expected = _textured_against_void(alpha)
+    blended, changed = blend_edges(d, alpha, photo)
+    np.testing.assert_array_equal(changed, edge(alpha))
+    np.testing.assert_allclose(recolor(blended, kappa), expected, rtol=2e-5, atol=1e-7)
+    np.testing.assert_allclose(recolor(blended, 1.0), photo, rtol=1e-5, atol=1e-7)
+
+
+def test_blend_edges_takes_all_the_light_of_a_pixel_against_a_void_in_the_frame():
+    """A textured target beside a void inside the frame (radiance 0): the split gives the target all the
+    edge pixel's light, exactly, where extrapolating the texture from the solid pixels would not."""
+    alpha = np.zeros((10, 12), np.float32)
+    alpha[:, 6:] = 1.0
+    alpha[:, 5] = np.random.default_rng(1).uniform(0.1, 0.9, 10)
+    d, photo, kappa, expected = _textured_against_void(alpha)
+    blended, changed = blend_edges(d, alpha, photo)
+    np.testing.assert_array_equal(changed, edge(alpha))
+    np.testing.assert_allclose(recolor(blended, kappa), expected, rtol=2e-5, atol=1e-7)
