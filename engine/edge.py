@@ -305,7 +305,7 @@ def blend_edges(
     have. An edge pixel whose window (at ``3 radius``) holds solid pixels but no outside pixel
     because the frame cuts it off borders what lies beyond the frame, which the camera never
     saw: its whole ``F`` is the target part too (before, such a pixel was left as non-target).
-    On the path-traced textured wall at 512 spp (true coverage, κ = (2, 0.125, 8)) the 7 edge
+    On the path-traced textured wall at 512 spp (true coverage, κ = (2, 0.125, 1.2), Fig. 12) the 7 edge
     pixels against the void go from 82 % to 2.3 % error (the pixel at the frame's border from
     216 % to 1 %), all edge pixels from 16.8 to 7.5 %, the wall from 5.0 to 2.9 %; the ideal
     Cornell box, whose edges have lit neighbours, does not change.
