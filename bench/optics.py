@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -68,10 +69,8 @@ import devices
 from app.model.noise import denoise_radius
 from engine.acquire import CaptureSettings, Recorder, acquire_single, calibrate_rig
 from engine.acquire.predict import relative_error
-from engine.decompose import decompose
 from engine.denoise import denoise_components
 from engine.edge import blend_edges, refine_mask
-from engine.fill import fill_unreachable
 from engine.recolor import recolor
 from engine.trust import recolor_trusted
 
@@ -135,7 +134,7 @@ def _decomposition(acq, denoise, *, previous=""):
         return denoise_components(acq.target.decompose(acq.observations), acq.observations[0], radius=denoise)
     if previous == "square" and denoise:
         t, obs = acq.target, acq.observations
-        d = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
+        d = _unblended(t, obs)
         return blend_edges(denoise_components(d, obs[0], radius=denoise), t.coverage, obs[0])[0]
     return acq.target.decompose(acq.observations, denoise=denoise)
 
@@ -260,7 +259,7 @@ def part_noise(args):
     wall, interior = cov_true > 0, interior_of(cov_true)
     edge, keep = wall & ~interior, ~lamp
     t, obs = acq.target, acq.observations
-    d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
+    d0 = _unblended(t, obs)
     filtered = denoise_components(d0, obs[0], radius=4)
 
     def blended(d, unfiltered=None, along=0):
@@ -291,13 +290,16 @@ def part_noise(args):
                   f"{100 * relative_error(img, truth, keep & ~wall):7.2f}%", flush=True)
 
 
+def _unblended(target, observations):
+    """The target's decomposition (unreachable pixels filled) before a soft mask's edge blend."""
+    return replace(target, coverage=None).decompose(observations)
+
+
 def _keep_measured(filtered, measured, unfiltered):
     """``filtered`` with the pixels ``unfiltered`` (H, W) bool keeping their ``measured`` components."""
-    from engine.decompose import Decomposition
-
-    return Decomposition(np.where(unfiltered[None, :, :, None], measured.components, filtered.components),
-                         np.where(unfiltered[:, :, None], measured.unreached, filtered.unreached), filtered.target,
-                         filtered.constraint, filtered.unreached_light, filtered.residual, filtered.covariance)
+    keep = unfiltered[None, :, :, None]
+    return replace(filtered, components=np.where(keep, measured.components, filtered.components),
+                   unreached=np.where(keep[0], measured.unreached, filtered.unreached))
 
 
 def _denoised_on_target(acq, radius):
@@ -306,7 +308,7 @@ def _denoised_on_target(acq, radius):
     if not radius:
         return _decomposition(acq, 0)
     t, obs = acq.target, acq.observations
-    d0 = fill_unreachable(decompose(obs, t.mask), t.mask | t.unreachable, obs[0], radius=3)[0]
+    d0 = _unblended(t, obs)
     d = _keep_measured(denoise_components(d0, obs[0], radius=radius), d0, t.coverage <= 0)
     return blend_edges(d, t.coverage, obs[0])[0]
 
@@ -406,8 +408,7 @@ def part_edge(args):
     ys, xs = np.nonzero(edge)
 
     def true_neighbour(obs, kappa):
-        d = decompose(obs, target.mask)
-        d = fill_unreachable(d, target.mask | target.unreachable, obs[0])[0]
+        d = _unblended(target, obs)
         out = recolor(d, kappa)
         own = np.concatenate([d.unreached[None], d.components[:order - 1]])[:, ys, xs].astype(np.float64)
         own *= (obs[0][ys, xs] / np.maximum(own.sum(0), 1e-30))[None]
@@ -886,8 +887,6 @@ def part_grazing(args):
     on the target. Recolor: whole image without the lamp, with the demo's κ = (2, 0.125, 8) and with
     the κ that takes the wall to the paper's blue (the demo's κ on the Cornell box's green wall).
     """
-    import dataclasses
-
     from engine.acquire.target import prepare_target
 
     # (scene, target, camera pixels a side, checkerboard period, radiosity patch size in m: None = the scene's)
@@ -908,7 +907,7 @@ def part_grazing(args):
         measured = prepare_target(exp.rec, exp.calibration, exp.hard, base, period=period, shifts=shifts)
         mask = measured.mask
         exact_d = np.where(mask[:, :, None], rig.truth.direct(mask), 0).astype(np.float32)
-        exact = dataclasses.replace(measured, direct=exact_d)
+        exact = replace(measured, direct=exact_d)
         rel = (measured.direct[mask] / exact_d[mask] - 1).ravel()
         comps = rig.truth.components(exp.hard, 2, ambient=exp.ambient, pattern=exp.flood)
         blue = PAPER_BLUE / rig.truth.albedo()[exp.hard].mean(axis=0)
