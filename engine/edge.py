@@ -141,6 +141,29 @@ def stand_in(coverage, emitted, *, radius: int = 2) -> np.ndarray:
     return np.where(emitted, out, 0.0).astype(np.float32)
 
 
+def unblended(decomposition: Decomposition, coverage) -> np.ndarray:
+    """(H, W) bool: the edge pixels :func:`blend_edges` left as non-target.
+
+    Edge pixels (0 < coverage < 1) neither decomposed as target nor blended: no wholly-target
+    pixel within ``3 radius`` pixels (a stray feathered stroke, a feather wider than the
+    blend's window), or a window inside the frame with wholly-target pixels but no outside one.
+    Recoloring scales them as the neighbour (Eq. 4), so callers report them.
+
+    Examples
+    --------
+    >>> from engine.decompose import Decomposition
+    >>> d = Decomposition(np.zeros((1, 1, 3, 1), np.float32), np.zeros((1, 3, 1), np.float32),
+    ...                   np.array([[True, False, False]]))
+    >>> unblended(d, np.array([[1, 0.5, 0.5]], np.float32)).tolist()
+    [[False, True, True]]
+    """
+    if not isinstance(decomposition, Decomposition):
+        raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
+    cov = check_coverage("coverage", coverage, decomposition.shape[:2])
+    left = edge(cov) & ~decomposition.target
+    return left if decomposition.blended is None else left & ~decomposition.blended
+
+
 def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, claimed=None) -> np.ndarray:
     """Refine a hard target mask into coverage along the photograph's edges.
 
@@ -270,8 +293,8 @@ def blend_edges(
     blended : (H, W) bool
         The edge pixels changed: those with solid and outside pixels in their window, and those
         whose window the frame cuts off before any outside pixel (below). The edge pixels left
-        as non-target, for callers to report, are ``edge(coverage) & ~decomposition.target &
-        ~blended``: no solid pixel within ``3 radius`` pixels (or K = 1).
+        as non-target, for callers to report, are :func:`unblended`: no solid pixel within
+        ``3 radius`` pixels (or K = 1).
 
     Notes
     -----

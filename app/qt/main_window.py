@@ -51,6 +51,7 @@ APP_NAME = app.APP_NAME
 PREFERRED_SIZE = (1500, 920)
 #: The settings key remembering the user's choice of recolor (View ▸ Noise-Aware Recolor) for new acquisitions.
 NOISE_AWARE_SETTING = "recolor/noise_aware"
+LINK_SETTING = "albedo/link_channels"
 
 
 class MainWindow(QMainWindow):
@@ -199,6 +200,9 @@ class MainWindow(QMainWindow):
         self.colour_panel.reference_requested.connect(self.open_reference)
         self.exposure_spin.valueChanged.connect(self.colour_panel.refresh)
         self.albedo_panel = AlbedoPanel(document, colour=self.colour_panel)
+        # "Link channels" is how the user likes to drag κ, not part of the edit: remembered across documents
+        self.albedo_panel.link.setChecked(str(self.settings.value(LINK_SETTING, "true")).lower() not in ("false", "0"))
+        self.albedo_panel.link.toggled.connect(lambda on: self.settings.setValue(LINK_SETTING, bool(on)))
         self.noise_panel = NoiseReductionPanel(document)
         self.noise_panel.apply_requested.connect(self.apply_noise_reduction)
         self.targets_dock.setWidget(scrolling(self.target_panel, "targets_scroll"))

@@ -109,6 +109,8 @@ RESULT = Obj(required={
     "unreachable": Map(Str(min_len=1, max_len=256), _COUNT),
     "estimated": _COUNT,
     "log": List(_LOG_ENTRY),
+}, optional={
+    "unblended": _COUNT,  # a soft mask's edge pixels left as non-target (engine.edge.unblended); absent before
 })
 
 #: The session's JSON state: known keys checked, others free.

@@ -12,7 +12,7 @@ from engine.acquire.cascade import CascadeResult
 from engine.calibrate import Calibration, fill_correspondence
 from engine.checks import check_kappa, check_mask
 from engine.decompose import Decomposition
-from engine.edge import check_coverage, is_soft, solid
+from engine.edge import check_coverage, is_soft, solid, unblended
 from engine.errors import InputError, SessionError
 from engine.figurate import MAX_ORDER
 from engine.progress import Progress, ShouldStop
@@ -325,6 +325,7 @@ def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, ad
             "clamped": result.acquisition.clamped,
             "unreachable": {name: int(p.unreachable.sum()) for name, p in result.targets},
             "estimated": int((d.target & ~last.mask).sum()),
+            "unblended": 0 if last.coverage is None else int(unblended(d, last.coverage).sum()),
             "log": result.log,
         },
     )
@@ -334,12 +335,20 @@ def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, ad
 
 
 def estimated_report(session: Session) -> str:
-    """One line on the unreachable target pixels the last capture estimated (empty if none)."""
+    """One line on the target pixels the last capture estimated or left out (empty if none).
+
+    The unreachable target pixels given their neighbours' shares (:func:`engine.fill.fill_unreachable`)
+    and those too far for that; the edge pixels of a soft mask that could not be split between
+    the target and its neighbour (:func:`engine.edge.unblended`), which recolor as the neighbour.
+    """
     result = session.state.get("result") or {}
-    n = int(result.get("estimated", 0))
-    if not n:
-        return ""
-    last = (session.state.get("plan") or {}).get("targets", [None])[-1]  # only the last target is filled
-    left = int((result.get("unreachable") or {}).get(last, n))
-    return (f"{n} unreachable target pixels were given the interaction shares of reachable neighbours "
-            f"(engine.fill); {max(left - n, 0)} farther from any keep their colour")
+    lines = []
+    if n := int(result.get("estimated", 0)):
+        last = (session.state.get("plan") or {}).get("targets", [None])[-1]  # only the last target is filled
+        left = int((result.get("unreachable") or {}).get(last, n))
+        lines.append(f"{n} unreachable target pixels were given the interaction shares of reachable neighbours "
+                     f"(engine.fill); {max(left - n, 0)} farther from any keep their colour")
+    if m := int(result.get("unblended", 0)):
+        lines.append(f"{m} edge pixels (partly target) have no wholly-target or no outside pixel within 3 pixels to "
+                     "split them by and recolor as not target: paint the target up to them, or harden the edge there")
+    return "; ".join(lines)

@@ -6,7 +6,7 @@ import pytest
 import devices
 from engine.acquire import Recorder, acquire_single, calibrate_rig
 from engine.acquire.predict import relative_error
-from engine.edge import refine_mask
+from engine.edge import refine_mask, unblended
 from engine.recolor import recolor
 
 KAPPA = np.array([0.5, 1.2, 0.8])
@@ -81,14 +81,16 @@ def test_margin_keeps_emission_off_projector_pixels_next_to_the_edge(bench):
 def test_a_soft_target_goes_through_a_session_and_comes_back_soft(tmp_path):
     from engine.session import Session
     from engine.session.edit import mask_digest, mask_name
-    from engine.workflow import load_decomposition, run_calibration, run_capture
+    from engine.workflow import estimated_report, load_decomposition, run_calibration, run_capture
 
     with devices.open_rig("virtual:cornell", ideal=True, resolution=(24, 24), supersample=4,
                           cache_dir=tmp_path / "cache") as rig:
         session = Session.create(tmp_path / "s", rig_name=rig.identity, camera_resolution=rig.camera.resolution,
                                  projector_resolution=rig.projector.resolution)
         run_calibration(rig, session)
-        cov = rig.coverage["right_wall"]
+        cov = rig.coverage["right_wall"].copy()
+        assert not (cov[:6, :6] > 0).any()
+        cov[1:3, 1:3] = 0.5  # a stray feathered stroke, far from the wall: nothing to split it by
         mixed = (cov > 0) & (cov < 1)
         result = run_capture(rig, session, [("wall", cov)], 2)
     stored = session.read_mask(mask_name("wall", mask_digest(cov)))
@@ -98,6 +100,10 @@ def test_a_soft_target_goes_through_a_session_and_comes_back_soft(tmp_path):
     assert not (d.target & ~(cov >= 1)).any()  # only solid pixels are re-emitted
     photo = result.acquisition.observations[0]
     np.testing.assert_allclose(recolor(d, 1.0)[mixed], photo[mixed], rtol=1e-5, atol=1e-6)
+    # the stray stroke's pixels are the only ones left unblended, and the capture says so
+    assert np.array_equal(unblended(d, cov), np.pad(np.ones((2, 2), bool), ((1, 21), (1, 21))))
+    assert session.state["result"]["unblended"] == 4
+    assert estimated_report(session).startswith("4 edge pixels (partly target) have no wholly-target")
     # recomputed from the session's captures and its stored soft mask: the same decomposition
     again = load_decomposition(Session.open(tmp_path / "s"), key="0123456789abcdef")
     np.testing.assert_array_equal(again.components, d.components)

@@ -174,6 +174,7 @@ def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, tmp
     back = again.doc.by_name("right_wall")
     np.testing.assert_array_equal(back.coverage, refined)
     np.testing.assert_array_equal(back.kappa, kappa)
+    assert not user.find("kappa_link", QCheckBox).isChecked()  # unlinked before: a preference, remembered
     np.testing.assert_array_equal(recolor(again.doc.decomposition, kappa), ours)
     user.wait_until(lambda: again.canvas.frame is not None and np.array_equal(again.canvas.frame.pixels, shown))
     user.select_row(user.find("targets_list", QListWidget), 2)
