@@ -198,3 +198,40 @@ def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, tmp
     assert run.returncode == 0, run.stderr
     np.testing.assert_array_equal(imageio.read_image(cli_exr), exported)
     assert imageio.read_metadata(app_exr)["edit"] == imageio.read_metadata(cli_exr)["edit"]
+
+
+def test_a_stray_feathered_dab_is_reported_after_acquiring(make_window, qtbot, monkeypatch, dialogs):
+    """The artist's feathered dab lands far from the wall it was meant for: acquiring says that its
+    pixels could not be split between target and neighbour (they recolor as not target)."""
+    import app.model.demo
+
+    real = app.model.demo.open_demo
+    monkeypatch.setattr(app.model.demo, "open_demo",
+                        lambda name, **kw: real(name, **dict(kw, resolution=RES, supersample=4)))
+    window = make_window()
+    user = User(qtbot, window)
+    user.trigger("demo")
+    doc = window.doc
+    wall = doc.by_name("right_wall")
+    dialogs.answers = [QMessageBox.StandardButton.Yes]
+    user.trigger("discard")
+    user.select_row(user.find("targets_list", QListWidget), 2)
+    assert doc.current == wall.uid
+
+    # a soft dab on a pixel corner at the far left of the frame, no wall pixel within 3 px: 2 × 2 half-covered pixels
+    user.type_into("brush_size", "3")
+    user.type_into("brush_hardness", "0")
+    window.canvas.setFocus()
+    user.press(Qt.Key.Key_B)
+    y, x = RES[0] // 2, 4
+    assert not wall.mask[y - 5:y + 5, x - 5:x + 5].any()
+    user.drag_on_canvas(window.canvas, [(x, y), (x, y)])
+    stray = (wall.coverage > 0) & (wall.coverage < 1)
+    stray[:, RES[1] // 2:] = False
+    assert stray.sum() == 4 and not (wall.coverage[:, : RES[1] // 2] >= 1).any()
+
+    user.trigger("acquire")
+    dialogs.answers = [QMessageBox.StandardButton.Yes]
+    user.click("acquire_start")
+    status = user.find("acquire_status").text()
+    assert "Captured" in status and "4 edge pixels (partly target) have no wholly-target" in status, status
