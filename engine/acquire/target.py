@@ -18,7 +18,7 @@ recolored from both sides' interaction shares when decomposing.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,7 +37,7 @@ from engine.calibrate.warp import SPREAD_CAPTURES
 from engine.checks import check_mask
 from engine.decompose import Decomposition, decompose
 from engine.denoise import denoise_components
-from engine.edge import blend_edges, check_coverage, is_soft
+from engine.edge import blend_edges, check_coverage, edge, is_soft
 from engine.edge import stand_in as stand_in_weights
 from engine.errors import InputError
 from engine.fill import fill_unreachable
@@ -132,7 +132,13 @@ class PreparedTarget:
                       constraint=constraint)
         d = fill_unreachable(d, self.mask | self.unreachable, photograph, radius=fill_radius)[0]
         if denoise:
-            d = denoise_components(d, photograph, radius=denoise)
+            kept = d.blended
+            if self.coverage is not None:
+                # the edge pixels, not blended yet, hold the target's light beside the neighbour's: the
+                # filter neither smooths nor reads them, as it leaves blended ones
+                pending = edge(self.coverage) & ~d.target
+                d = replace(d, blended=pending if kept is None else pending | kept)
+            d = replace(denoise_components(d, photograph, radius=denoise), blended=kept)
         if self.coverage is not None:
             d = blend_edges(d, self.coverage, photograph, radius=edge_radius, along=denoise)[0]
         return d
