@@ -317,9 +317,10 @@ def blend_edges(
     1.56 → 0.99 % at 128² (the split alone 1.75, 1.29, 1.06 %), the wall with its edge from
     8.9× to 4.9× its interior at 48²; path-traced at 512 spp (``mitsuba:textured``, 48², against
     the mean of 4 truth renders) 6.38 → 4.36 % (the split alone 3.44 %), 6.41 → 5.59 % with the
-    noise reduction the measured noise asks for (radius 8; the split alone 10.4 %). The ideal
-    Cornell box does not change (48², 64², 128², true or refined coverage, κ = (0.5, 1.2, 0.8) and
-    (2, 0.125, 8): edge pixels within 0.1 %), nor the path-traced one (48², 512 spp). Where no
+    noise reduction the measured noise asks for (radius 8; the split alone 10.4 %). Without noise
+    reduction the ideal Cornell box does not change (48², 64², 128², true or refined coverage,
+    κ = (0.5, 1.2, 0.8) and (2, 0.125, 8): edge pixels within 0.1 %), nor the path-traced one (48²,
+    512 spp). Where no
     two target pixels line up with the edge pixel, the neighbour's part is ``(1 − w) I s_N``,
     with ``s_N`` the mean shares ``(L̄_d, C R^i L_d) / I`` of the lit outside pixels
     (coverage 0) in the window, renormalised to sum to 1, and ``w`` the target's share of
@@ -441,7 +442,7 @@ def _blend(
     void = np.full(len(vy), bool(beyond)) | ((pixel > 0) & (np.abs(i_out) <= VOID * pixel)).all(axis=-1)
     # where the target reaches the edge in a line, its part is the strip's own components (never more
     # than the pixel holds, so that the neighbour's part stays non-negative and κ = 1 gives I) where the
-    # target is smooth and they agree, the split's where it is textured or they do not (noise)
+    # target is smooth and the strip's directions agree; the split's where it is textured or they do not
     texture = _texture(photo, decomposition.target, fy, fx)
     split = np.maximum(np.clip((texture - TEXTURE[0]) / (TEXTURE[1] - TEXTURE[0]), 0, 1),
                        np.clip((spread - SPREAD[0]) / (SPREAD[1] - SPREAD[0]), 0, 1))[None, :, None]
@@ -569,9 +570,9 @@ def _texture(photo, inside, ys, xs, radius: int = 2) -> np.ndarray:
     right wall: τ ≤ 0.034 beside every edge pixel at 48², ≤ 0.013 at 128²; path-traced at 512 spp,
     48², ≤ 0.032); an albedo texture is not (Fig. 12's checker wall at 48²: median 0.07, up to
     0.24), and it is what a linear extrapolation from the solid pixels (:func:`_strip`) misses. A
-    texture that varies across a straight edge only is followed (the window holds two target
-    columns there): the strip's directions then disagree instead, unless the texture is
-    parallel to the edge.
+    texture that varies across a straight edge only goes unseen: the window holds two target
+    columns there, which the quadratic fits exactly, and the strip's directions all read them
+    alike.
     """
     h, w = inside.shape
     dy, dx = (a.ravel() for a in np.mgrid[-radius:radius + 1, -radius:radius + 1])
