@@ -245,7 +245,7 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
 
 
 def blend_edges(
-    decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0
+    decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0, smoothed: bool = False
 ) -> tuple[Decomposition, np.ndarray]:
     """Recolor edge pixels: their target part as target, their neighbour's part as non-target.
 
@@ -268,6 +268,11 @@ def blend_edges(
         pixel are fitted to the blended pixels within this many pixels (square window)
         whose edge faces the same way (least squares, below); 0 (the default) leaves every
         pixel's own.
+    smoothed : bool
+        Whether the edge pixels' decomposition was noise-reduced with the pixels around them
+        (:meth:`engine.acquire.PreparedTarget.decompose` filters before the blend): each then
+        mixes the neighbour's light and shares into its ``F``, which the radiance split's target
+        part would take whole, so edge pixels keep the strip wherever it exists (below).
 
     Returns
     -------
@@ -316,11 +321,15 @@ def blend_edges(
     supersampled textured wall (``virtual:textured``) 2.60 → 1.42 % at 48², 2.40 → 1.18 % at 64²,
     1.56 → 0.99 % at 128² (the split alone 1.75, 1.29, 1.06 %), the wall with its edge from
     8.9× to 4.9× its interior at 48²; path-traced at 512 spp (``mitsuba:textured``, 48², against
-    the mean of 4 truth renders) 6.38 → 4.36 % (the split alone 3.44 %), 6.41 → 5.59 % with the
-    noise reduction the measured noise asks for (radius 8; the split alone 10.4 %). Without noise
-    reduction the ideal Cornell box does not change (48², 64², 128², true or refined coverage,
-    κ = (0.5, 1.2, 0.8) and (2, 0.125, 8): edge pixels within 0.1 %), nor the path-traced one (48²,
-    512 spp). Where no
+    the mean of 4 truth renders) 6.38 → 4.36 % (the split alone 3.44 %). The ideal Cornell box
+    does not change (48², 64², 128², true or refined coverage, κ = (0.5, 1.2, 0.8) and
+    (2, 0.125, 8): edge pixels within 0.1 %), nor the path-traced one (48², 512 spp; 64², 1024
+    spp). With ``smoothed`` (noise reduction before the blend) the split is not taken: the
+    filter, which reduces the edge pixels' noise by smoothing them with the pixels around them
+    (path-traced Cornell box, 64², 1024 spp, κ = (2, 0.125, 8), radius 3: edge pixels 11.6 →
+    6.4 %), mixes the neighbour's shares into ``F``, and the split's target part took them whole
+    (at 48², radius 4: the ideal textured wall 3.22 → 3.92 %, the ideal Cornell box's refined mask
+    11.2 → 13.6 %; the path-traced box at 32², 32 spp, 13.4 → 29.8 %). Where no
     two target pixels line up with the edge pixel, the neighbour's part is ``(1 − w) I s_N``,
     with ``s_N`` the mean shares ``(L̄_d, C R^i L_d) / I`` of the lit outside pixels
     (coverage 0) in the window, renormalised to sum to 1, and ``w`` the target's share of
@@ -365,13 +374,14 @@ def blend_edges(
     for r, beyond in ((int(radius), False), (3 * int(radius), False), (3 * int(radius), True)):
         if not (todo & ~blended).any() or k < 2:
             break
-        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended, int(along), beyond)
+        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended, int(along), beyond,
+                                     bool(smoothed))
         blended |= done
     return decomposition, blended
 
 
 def _blend(
-    decomposition: Decomposition, cov, photo, r: int, mixed, along: int, beyond: bool
+    decomposition: Decomposition, cov, photo, r: int, mixed, along: int, beyond: bool, smoothed: bool
 ) -> tuple[Decomposition, np.ndarray]:
     """:func:`blend_edges` of the pixels ``mixed`` with a ``(2r+1)²`` window.
 
@@ -446,6 +456,8 @@ def _blend(
     texture = _texture(photo, decomposition.target, fy, fx)
     split = np.maximum(np.clip((texture - TEXTURE[0]) / (TEXTURE[1] - TEXTURE[0]), 0, 1),
                        np.clip((spread - SPREAD[0]) / (SPREAD[1] - SPREAD[0]), 0, 1))[None, :, None]
+    if smoothed:  # F mixes the neighbour's shares: the split's target part would take them whole
+        split = np.zeros_like(split)
     strip = np.clip(strip, 0, np.maximum(own, 0))
     strip_at = found & ~void
     target_part[:, strip_at] = ((1 - split) * strip + split * target_part)[:, strip_at]

@@ -18,7 +18,7 @@ recolored from both sides' interaction shares when decomposing.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -37,7 +37,7 @@ from engine.calibrate.warp import SPREAD_CAPTURES
 from engine.checks import check_mask
 from engine.decompose import Decomposition, decompose
 from engine.denoise import denoise_components
-from engine.edge import blend_edges, check_coverage, edge, is_soft
+from engine.edge import blend_edges, check_coverage, is_soft
 from engine.edge import stand_in as stand_in_weights
 from engine.errors import InputError
 from engine.fill import fill_unreachable
@@ -125,31 +125,16 @@ class PreparedTarget:
         and 12.0 % without noise reduction. The guided filter reads an edge pixel's neighbours
         in a square; its noise is reduced further along the edge, a curve, where the neighbour's
         shares vary slowly: 6.5 % with that (the wall with its edge 3.57 → 3.19 %, 1.69 → 1.51× its
-        interior, on one acquisition). The edge pixels themselves, not blended yet, are left out of
-        the filter (neither smoothed nor read, as blended ones are): each holds the target's light
-        beside the neighbour's, and smoothed with the outside pixels it gave them the target's
-        shares, which the blend reads as the neighbour's. Edge pixels (coverage < 1 or next to it),
-        κ = (2, 0.125, 8), radius 4, true / refined coverage: the ideal supersampled Cornell box
-        5.35 / 11.2 → 3.90 / 8.9 % at 48², 4.64 / 6.91 → 3.06 / 6.69 % at 64², 7.09 / 13.2 → 2.25 /
-        11.5 % at 128² (without noise reduction 2.22 / 8.60, 1.86 / 6.98, 0.75 / 16.2 %); at 40² the
-        filter had lowered them below the unfiltered figure (5.85 → 4.70 %) and no longer does
-        (6.19 %); path-traced at 512 spp, 48², radius 3 (the measured noise's), 6.00 / 33.5 →
-        4.29 / 32.9 %.
+        interior, on one acquisition).
         """
         photograph = np.asarray(observations)[0]
         d = decompose(observations, self.mask, unreached_light=unreached_light, covariance=covariance,
                       constraint=constraint)
         d = fill_unreachable(d, self.mask | self.unreachable, photograph, radius=fill_radius)[0]
         if denoise:
-            kept = d.blended
-            if self.coverage is not None:
-                # the edge pixels, not blended yet, hold the target's light beside the neighbour's: the
-                # filter neither smooths nor reads them, as it leaves blended ones
-                pending = edge(self.coverage) & ~d.target
-                d = replace(d, blended=pending if kept is None else pending | kept)
-            d = replace(denoise_components(d, photograph, radius=denoise), blended=kept)
+            d = denoise_components(d, photograph, radius=denoise)
         if self.coverage is not None:
-            d = blend_edges(d, self.coverage, photograph, radius=edge_radius, along=denoise)[0]
+            d = blend_edges(d, self.coverage, photograph, radius=edge_radius, along=denoise, smoothed=bool(denoise))[0]
         return d
 
     def stand_in(self) -> np.ndarray | None:

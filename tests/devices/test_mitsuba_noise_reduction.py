@@ -41,10 +41,7 @@ def test_noise_reduction_before_the_edge_blend_keeps_the_edge(tmp_path):
     }
     # measured (seed 3): 20.6 % without noise reduction, 17.3 % filtered before the blend, and 20.6 % filtered
     # after it (which leaves the blended edge pixels out: filtering them with the neighbour's pixels once made
-    # them 36 %); the gain is the pixels beside the edge filtered before the edge pixels are split from them.
-    # Since the filter leaves the unblended edge pixels out too, and edge pixels beside texture (or the noise of
-    # this 32-spp photograph) take the radiance split: 19.9 / 14.3 / 19.9 % (13.4 % for the filter before the
-    # blend just before that change, on the same machine)
+    # them 36 %); the gain is the edge pixels filtered with the pixels beside them before they are split
     assert errors["before"] < 0.9 * errors["off"] and errors["before"] < 0.9 * errors["after"], errors
 
 
