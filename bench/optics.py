@@ -135,7 +135,7 @@ def _decomposition(acq, denoise, *, previous=""):
     if previous == "square" and denoise:
         t, obs = acq.target, acq.observations
         d = _unblended(t, obs)
-        return blend_edges(denoise_components(d, obs[0], radius=denoise), t.coverage, obs[0])[0]
+        return blend_edges(denoise_components(d, obs[0], radius=denoise), t.coverage, obs[0], smoothed=True)[0]
     return acq.target.decompose(acq.observations, denoise=denoise)
 
 
@@ -262,18 +262,18 @@ def part_noise(args):
     d0 = _unblended(t, obs)
     filtered = denoise_components(d0, obs[0], radius=4)
 
-    def blended(d, unfiltered=None, along=0):
+    def blended(d, unfiltered=None, along=0, smoothed=True):
         if unfiltered is not None:
             d = _keep_measured(d, d0, unfiltered)
-        return recolor(blend_edges(d, t.coverage, obs[0], along=along)[0], K2)
+        return recolor(blend_edges(d, t.coverage, obs[0], along=along, smoothed=smoothed)[0], K2)
 
     rows = [
-        ("no noise reduction", blended(d0)),
+        ("no noise reduction", blended(d0, smoothed=False)),
         ("radius 4 before the edge blend", blended(filtered)),
         ("the same, fitted along the edge (now)", blended(filtered, along=4)),
         ("radius 4 after the edge blend (before)", recolor(denoise_components(t.decompose(obs), obs[0], radius=4), K2)),
         ("radius 4 before, outside pixels unfiltered", blended(filtered, t.coverage <= 0)),
-        ("radius 4 before, only the target filtered", blended(filtered, t.coverage < 1)),
+        ("radius 4 before, only the target filtered", blended(filtered, t.coverage < 1, smoothed=False)),
         ("noise-aware, Monte Carlo variance known", recolor_trusted(t.trust(obs, acq.covariance), K2).image),
         ("noise-aware, Monte Carlo variance unknown", recolor_trusted(
             unknown.target.trust(unknown.observations, unknown.covariance), K2).image),
@@ -310,7 +310,7 @@ def _denoised_on_target(acq, radius):
     t, obs = acq.target, acq.observations
     d0 = _unblended(t, obs)
     d = _keep_measured(denoise_components(d0, obs[0], radius=radius), d0, t.coverage <= 0)
-    return blend_edges(d, t.coverage, obs[0])[0]
+    return blend_edges(d, t.coverage, obs[0], smoothed=True)[0]
 
 
 def part_virtual(args):

@@ -10,7 +10,8 @@ target or as non-target leaves a seam along every edge. Here the target is a *so
   projector footprint is wholly on it, :func:`engine.acquire.prepare_target`);
 * pixels with 0 < α < 1 (*edge*) are not re-emitted; their light — measured by the
   re-emissions around it, the target's part one interaction late — is split into the target's
-  part (the target's components extrapolated to the strip of it in the pixel) and the
+  part (the target's components extrapolated to the strip of it in the pixel, or, beside a
+  textured target, the pixel's light less the neighbour's by radiance) and the
   neighbour's (the rest): :func:`blend_edges`; under noise, the neighbour's interaction shares
   are fitted along the edge, where they vary slowly (its ``along``);
 * the emitted pixels next to the edge also emit the edge's target part (:func:`stand_in`), so
@@ -34,6 +35,13 @@ from engine.errors import InputError
 #: Outside pixels whose mean radiance is at most this fraction of an edge pixel's own, in every channel,
 #: are a void (no surface): :func:`blend_edges` then takes all of the pixel's light as the target's.
 VOID = 1e-3
+
+#: The target's texture beside an edge pixel (:func:`_texture`) up to which :func:`blend_edges` takes the pixel's
+#: target part from the strip (the solid pixels extrapolated), and from which it takes the radiance split's,
+#: linearly between.
+TEXTURE = (0.03, 0.06)
+#: The same for the spread of the strip's extrapolations along the 8 directions over their mean (:func:`_strip`).
+SPREAD = (0.2, 0.4)
 
 
 def check_coverage(name: str, coverage, shape: tuple[int, int]) -> np.ndarray:
@@ -260,7 +268,7 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
 
 
 def blend_edges(
-    decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0
+    decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0, smoothed: bool = False
 ) -> tuple[Decomposition, np.ndarray]:
     """Recolor edge pixels: their target part as target, their neighbour's part as non-target.
 
@@ -283,6 +291,11 @@ def blend_edges(
         pixel are fitted to the blended pixels within this many pixels (square window)
         whose edge faces the same way (least squares, below); 0 (the default) leaves every
         pixel's own.
+    smoothed : bool
+        Whether the edge pixels' decomposition was noise-reduced with the pixels around them
+        (:meth:`engine.acquire.PreparedTarget.decompose` filters before the blend): each then
+        mixes the neighbour's light and shares into its ``F``, which the radiance split's target
+        part would take whole, so edge pixels keep the strip wherever it exists (below).
 
     Returns
     -------
@@ -311,9 +324,35 @@ def blend_edges(
     part is clipped to ``[0, F]``). Interreflections make those components steepest at a
     concave corner, where edges often are: on the ideal supersampled Cornell box (128²,
     κ = (2, 0.125, 8)) the wall with its edge is at 1.48× its interior this way, against 7.0×
-    taking the neighbour's part from the shares of the outside pixels around (below), which
-    change as fast there but are not measured as well (the outside pixels' observations miss
-    the edge strip's re-emission, which the stand-in only sends from a pixel away). Where no
+    taking the neighbour's part from the shares of the outside pixels around (the radiance
+    split, below), which change as fast there but are not measured as well (the outside
+    pixels' observations miss the edge strip's re-emission, which the stand-in only sends from
+    a pixel away). But a linear extrapolation misses a *textured* target's own albedo in the
+    strip (a checker's jump across the two pixels it reads, or in the strip itself) by tens of
+    percent, and it multiplies the noise of the two pixels it reads; the radiance split reads
+    the neighbour instead. So each edge pixel takes ``(1 − s)`` of the strip's target part and
+    ``s`` of the split's, ``s`` the larger of two ramps: the target's texture around the pixel,
+    :func:`_texture` ``τ`` (what a quadratic trend leaves of the photograph of the target
+    pixels within 2 pixels), from 0 at ``τ`` = :data:`TEXTURE` [0] = 0.03 to 1 at 0.06; and how
+    far the strip's directions disagree (the spread of its 8 extrapolations over their mean:
+    noise, or a texture the quadratic follows), from 0 at :data:`SPREAD` [0] = 0.2 to 1 at 0.4.
+    Shading is smooth over a few pixels: beside the ideal Cornell box's wall ``τ ≤ 0.034``
+    (48², 0.013 at 128²) and the spread ≤ 0.17 with true coverage, so its edge pixels keep the
+    strip (one pixel of 25 has ``s > 0`` at 48²); beside Fig. 12's checker wall (48²) ``τ`` has
+    a median of 0.07 and 33 of its 48 edge pixels take the split wholly. With true coverage,
+    κ = (2, 0.125, 1.2), edge pixels (those with coverage < 1 or next to them): the ideal
+    supersampled textured wall (``virtual:textured``) 2.60 → 1.42 % at 48², 2.40 → 1.18 % at 64²,
+    1.56 → 0.99 % at 128² (the split alone 1.75, 1.29, 1.06 %), the wall with its edge from
+    8.9× to 4.9× its interior at 48²; path-traced at 512 spp (``mitsuba:textured``, 48², against
+    the mean of 4 truth renders) 6.38 → 4.36 % (the split alone 3.44 %). The ideal Cornell box
+    does not change (48², 64², 128², true or refined coverage, κ = (0.5, 1.2, 0.8) and
+    (2, 0.125, 8): edge pixels within 0.1 %), nor the path-traced one (48², 512 spp; 64², 1024
+    spp). With ``smoothed`` (noise reduction before the blend) the split is not taken: the
+    filter, which reduces the edge pixels' noise by smoothing them with the pixels around them
+    (path-traced Cornell box, 64², 1024 spp, κ = (2, 0.125, 8), radius 3: edge pixels 11.6 →
+    6.4 %), mixes the neighbour's shares into ``F``, and the split's target part took them whole
+    (at 48², radius 4: the ideal textured wall 3.22 → 3.92 %, the ideal Cornell box's refined mask
+    11.2 → 13.6 %; the path-traced box at 32², 32 spp, 13.4 → 29.8 %). Where no
     two target pixels line up with the edge pixel, the neighbour's part is ``(1 − w) I s_N``,
     with ``s_N`` the mean shares ``(L̄_d, C R^i L_d) / I`` of the lit outside pixels
     (coverage 0) in the window, renormalised to sum to 1, and ``w`` the target's share of
@@ -358,13 +397,14 @@ def blend_edges(
     for r, beyond in ((int(radius), False), (3 * int(radius), False), (3 * int(radius), True)):
         if not (todo & ~blended).any() or k < 2:
             break
-        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended, int(along), beyond)
+        decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended, int(along), beyond,
+                                     bool(smoothed))
         blended |= done
     return decomposition, blended
 
 
 def _blend(
-    decomposition: Decomposition, cov, photo, r: int, mixed, along: int, beyond: bool
+    decomposition: Decomposition, cov, photo, r: int, mixed, along: int, beyond: bool, smoothed: bool
 ) -> tuple[Decomposition, np.ndarray]:
     """:func:`blend_edges` of the pixels ``mixed`` with a ``(2r+1)²`` window.
 
@@ -428,14 +468,22 @@ def _blend(
     own[0] += np.where(fits, 0.0, pixel - total)
     target_part = np.maximum(own - (1 - wgt)[None] * pixel[None] * s_out, 0)
     fy, fx = vy + rows.start, vx + cols.start
-    strip, found = _strip(decomposition.components, decomposition.target & (photo > 0).all(axis=-1), cov, fy, fx)
+    lit = decomposition.target & (photo > 0).all(axis=-1)
+    strip, found, spread = _strip(decomposition.components, lit, cov, fy, fx)
     # against a void (the outside pixels around hold no light, or the frame cuts them off) all the
     # pixel's light is the target's: its whole F, exactly, not the strip's extrapolation
     void = np.full(len(vy), bool(beyond)) | ((pixel > 0) & (np.abs(i_out) <= VOID * pixel)).all(axis=-1)
     # where the target reaches the edge in a line, its part is the strip's own components (never more
-    # than the pixel holds, so that the neighbour's part stays non-negative and κ = 1 gives I)
+    # than the pixel holds, so that the neighbour's part stays non-negative and κ = 1 gives I) where the
+    # target is smooth and the strip's directions agree; the split's where it is textured or they do not
+    texture = _texture(photo, decomposition.target, fy, fx)
+    split = np.maximum(np.clip((texture - TEXTURE[0]) / (TEXTURE[1] - TEXTURE[0]), 0, 1),
+                       np.clip((spread - SPREAD[0]) / (SPREAD[1] - SPREAD[0]), 0, 1))[None, :, None]
+    if smoothed:  # F mixes the neighbour's shares: the split's target part would take them whole
+        split = np.zeros_like(split)
+    strip = np.clip(strip, 0, np.maximum(own, 0))
     strip_at = found & ~void
-    target_part[:, strip_at] = np.clip(strip[:, strip_at], 0, np.maximum(own[:, strip_at], 0))
+    target_part[:, strip_at] = ((1 - split) * strip + split * target_part)[:, strip_at]
     target_part[:, void] = own[:, void]
     other = own - target_part
     if along:
@@ -467,7 +515,7 @@ def _blend(
     ), blended
 
 
-def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray]:
+def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The target part of edge pixels ``(ys, xs)``: ``α`` times the target's components extrapolated to the strip.
 
     Parameters
@@ -490,10 +538,14 @@ def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray]:
         target: from ``p_1 = q + d`` it is ``(1 + α) / 2`` pixel away.
     found : (N,) bool
         Edge pixels with at least one such pair.
+    spread : (N,) float64
+        How far the directions disagree: the standard deviation over ``d`` of the extrapolated
+        light ``Σ_i c̃_i`` over its mean (RMS over channels); 0 where fewer than two directions have a pair.
     """
     k, h, w, c = components.shape
     alpha = cov[ys, xs].astype(np.float64)
     total = np.zeros((k, len(ys), c))
+    square = np.zeros((len(ys), c))  # Σ_d (Σ_i c̃_i)², for the spread
     count = np.zeros(len(ys))
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)):
         at = {}  # the pixels 1, 2 and 3 steps along d: row, column, decomposed
@@ -510,12 +562,68 @@ def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray]:
             near = components[:, at[i][0][ok], at[i][1][ok]].astype(np.float64)
             far = components[:, at[j][0][ok], at[j][1][ok]].astype(np.float64)
             reach = (i - 1 + (1 + alpha[ok]) / 2) / (j - i)  # from p_i to the strip, in steps p_i − p_j
-            total[:, ok] += near + (near - far) * reach[None, :, None]
+            extrapolated = near + (near - far) * reach[None, :, None]
+            total[:, ok] += extrapolated
+            square[ok] += extrapolated.sum(axis=0) ** 2
             count += ok
             done |= ok
     found = count > 0
-    part = alpha[None, :, None] * total / np.maximum(count, 1)[None, :, None]
-    return part, found
+    mean = total / np.maximum(count, 1)[None, :, None]
+    light = mean.sum(axis=0)
+    deviation = np.maximum(square - count[:, None] * light**2, 0).sum(axis=-1) / np.maximum(count - 1, 1)
+    power = (light**2).sum(axis=-1)
+    spread = np.where((count > 1) & (power > 0), np.sqrt(deviation / np.where(power > 0, power, 1.0)), 0.0)
+    return alpha[None, :, None] * mean, found, spread
+
+
+def _texture(photo, inside, ys, xs, radius: int = 2) -> np.ndarray:
+    """How textured the target is next to edge pixels ``(ys, xs)``: what a quadratic trend leaves of its photograph.
+
+    Parameters
+    ----------
+    photo : (H, W, C) float
+        The photograph.
+    inside : (H, W) bool
+        The decomposed target pixels.
+    ys, xs : (N,) int
+        The edge pixels.
+    radius : int
+        Half-size of the square window around each edge pixel whose target pixels are fitted.
+
+    Returns
+    -------
+    (N,) float64
+        ``τ = sqrt((Σ r² / (n − p)) / (Σ I² / n))``: the residuals ``r`` of a least-squares fit of
+        ``1, y, x, y², x², xy`` (``p`` its rank) to the photograph ``I`` of the ``n`` target pixels
+        in the window, per degree of freedom, over the pixels' mean square, over all channels;
+        0 where ``n ≤ p``.
+
+    Notes
+    -----
+    Shading — direct light falling off, interreflections growing towards a concave corner — is
+    smooth over a few pixels, and a quadratic follows it (the ideal supersampled Cornell box's
+    right wall: τ ≤ 0.034 beside every edge pixel at 48², ≤ 0.013 at 128²; path-traced at 512 spp,
+    48², ≤ 0.032); an albedo texture is not (Fig. 12's checker wall at 48²: median 0.07, up to
+    0.24), and it is what a linear extrapolation from the solid pixels (:func:`_strip`) misses. A
+    texture that varies across a straight edge only goes unseen: the window holds two target
+    columns there, which the quadratic fits exactly, and the strip's directions all read them
+    alike.
+    """
+    h, w = inside.shape
+    dy, dx = (a.ravel() for a in np.mgrid[-radius:radius + 1, -radius:radius + 1])
+    py, px = ys[:, None] + dy[None], xs[:, None] + dx[None]  # (N, P)
+    ok = (py >= 0) & (py < h) & (px >= 0) & (px < w)
+    py, px = np.clip(py, 0, h - 1), np.clip(px, 0, w - 1)
+    ok &= inside[py, px]
+    terms = np.stack([np.ones_like(dy), dy, dx, dy * dy, dx * dx, dy * dx], axis=-1).astype(np.float64)  # (P, 6)
+    design = np.where(ok[:, :, None], terms[None], 0.0)  # (N, P, 6)
+    value = np.where(ok[:, :, None], photo[py, px], 0.0).astype(np.float64)  # (N, P, C)
+    residual = value - design @ (np.linalg.pinv(design) @ value)
+    n = ok.sum(axis=1)
+    dof = n - np.linalg.matrix_rank(design)
+    power = (value * value).sum(axis=(1, 2)) / np.maximum(n, 1)
+    spread = (residual * residual).sum(axis=(1, 2)) / np.maximum(dof, 1)
+    return np.where((dof > 0) & (power > 0), np.sqrt(spread / np.where(power > 0, power, 1.0)), 0.0)
 
 
 def _along_edge(part, cov, ys, xs, radius: int) -> np.ndarray:

@@ -134,7 +134,7 @@ class PreparedTarget:
         if denoise:
             d = denoise_components(d, photograph, radius=denoise)
         if self.coverage is not None:
-            d = blend_edges(d, self.coverage, photograph, radius=edge_radius, along=denoise)[0]
+            d = blend_edges(d, self.coverage, photograph, radius=edge_radius, along=denoise, smoothed=bool(denoise))[0]
         return d
 
     def stand_in(self) -> np.ndarray | None:
