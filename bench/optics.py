@@ -646,10 +646,10 @@ def part_fig13_samples(args):
           "(w); then the recolor's error, %: ours / "
           "noise-reduced / noise-aware (Monte Carlo variance) against the every-interaction truth, and against paint; "
           "naive; (two paint truths)")
+    coat = _fig13_coat(args)
     print(f"{'s':>5} {'α':>6} {'spp':>5} {'paper':>6} {'ref':>6} {'floor':>6} {'r':>2} {'dn':>6} {'w':>6} | "
           f"{'every':>6} {'dn':>6} {'trust':>6} | {'paint':>6} {'dn':>6} {'trust':>6} | {'naive':>6} {'(floor)':>7} "
           f"{'time':>6}")
-    coat = _fig13_coat(args)
     cals: dict = {}
     for share, alpha in [(0.0, 0.009), (0.1, 0.009), (0.1, 0.05)]:
         for spp in sweep:
