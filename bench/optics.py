@@ -31,7 +31,9 @@ previous behaviour (a hard mask, emitted and decomposed as target) in the same r
   order 4) over specular share × roughness against two truths — the paint under the coat
   recolored, and every interaction with the wall (gloss too) weighted by κ, as the paper's
   Fig. 13 counts interaction components — then the hard mask and a posed projector beside the
-  co-axial one, and the render noise (spp) of a sharp coat.
+  co-axial one, and the render noise (spp) of a sharp coat. ``--fig13-coat`` (both parts): ``tinted``
+  (default: the coat's specular reflectance is the paint's, so the share is the paper's specular
+  albedo over the total in every channel) or ``white`` (reflectance 1: share 16 / 36 / 16 % at 0.1).
 * ``fig13spp`` — Fig. 13's failing cells (specular share 0.1 at α = 0.009 and 0.05, and no coat)
   at each ``--fig13-spp-sweep``: the paper's metric beside its own Monte Carlo noise, and noise
   reduction sized from the measured noise and the noise-aware recolor beside the plain one.
@@ -443,6 +445,7 @@ def part_edge(args):
 
 
 FIG13_KAPPA = np.array([1.5, 4.5, 0.5])
+FIG13_TINTS = {"tinted": "albedo", "white": "white"}  # --fig13-coat -> the rig's coat tint
 
 
 def part_posed(args):
@@ -483,8 +486,11 @@ def part_posed(args):
 
 
 def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibrations=None, components=False,
-               extra=False):
+               extra=False, coat="tinted"):
     """One coat of the wedge's left wall: our recolor against the two truths, the naive one, the noise.
+
+    ``coat`` is ``"tinted"`` (specular reflectance = the paint's: ``share`` is the paper's specular
+    share of the total albedo in every channel) or ``"white"`` (share 16 / 36 / 16 % at 0.1).
 
     Returns a dict of relative errors (fractions): ``paint`` (truth: the diffuse reflectance under
     the coat scaled by κ, the physical repaint), ``every`` (truth: the coat's gloss scaled too,
@@ -507,7 +513,7 @@ def fig13_cell(share, alpha, *, res, spp, pose="coaxial", soft=True, calibration
     covariance).
     """
     rig = devices.open_rig("mitsuba:wedge", ideal=True, resolution=(res, res), spp=spp, truth_spp=4 * spp,
-                           specular=share, roughness=alpha, projector=pose)
+                           specular=share, roughness=alpha, tint=FIG13_TINTS[coat], projector=pose)
     ambient, flood = lighting(rig)
     rec = Recorder(rig, None)
     calibrations = {} if calibrations is None else calibrations
@@ -571,6 +577,17 @@ def _cell(e) -> str:
     return f"{100 * e['paint']:5.1f} {100 * e['every']:5.1f} {100 * e['naive']:5.1f} ({100 * e['floor']:4.1f}){paper}"
 
 
+def _fig13_coat(args) -> str:
+    """Print and return ``--fig13-coat``."""
+    if args.fig13_coat == "tinted":
+        print("coat: tinted (specular reflectance = the paint's (0.6, 0.2, 0.6): the share is the paper's, specular "
+              "albedo over the total, in every channel)")
+    else:
+        print("coat: white (specular reflectance 1 over the (0.6, 0.2, 0.6) paint: share s / (s + (1 - s) ρ) of the "
+              "total albedo, 16 / 36 / 16 % at s = 0.1; not the paper's definition)")
+    return args.fig13_coat
+
+
 def part_fig13(args):
     res, spp = (24, 64) if args.quick else (24, args.fig13_spp)
     shares = [0.0, 0.1] if args.quick else [0.0, 0.03, 0.1, 0.3]
@@ -581,6 +598,7 @@ def part_fig13(args):
           "scaled), ours vs the every-interaction truth (gloss scaled too: the paper's components), naive vs paint, "
           "(noise floor: two paint truth renders), [the paper's metric: mean |error| of each of the 4 components over "
           "its peak, averaged]")
+    coat = _fig13_coat(args)
     cals: dict = {}
     cells = {}
     print("-- co-axial projector, target = the rig's true coverage of the wall (no seam); rows: specular share, "
@@ -592,7 +610,7 @@ def part_fig13(args):
             if s == 0 and r != rough[0]:
                 cells[s, r] = cells[s, rough[0]]  # no coat: the same scene
             else:
-                cells[s, r] = fig13_cell(s, r, res=res, spp=spp, calibrations=cals, components=True)
+                cells[s, r] = fig13_cell(s, r, res=res, spp=spp, calibrations=cals, coat=coat, components=True)
             row.append(_cell(cells[s, r]))
         print(f"{s:6.3f} " + " ".join(f"{c:>31}" for c in row), flush=True)
 
@@ -600,15 +618,16 @@ def part_fig13(args):
           "projector (projector='offset': 0.25 m right of the camera)")
     print(f"{'share':>6} {'α':>6} {'co-axial, soft':>31} {'co-axial, hard mask':>24} {'posed, soft':>24}")
     for s, r in [(0.0, rough[0]), (0.1, rough[0]), (0.1, rough[-1])]:
-        hard = fig13_cell(s, r, res=res, spp=spp, soft=False, calibrations=cals)
-        posed = fig13_cell(s, r, res=res, spp=spp, pose="offset", calibrations=cals)
+        hard = fig13_cell(s, r, res=res, spp=spp, soft=False, calibrations=cals, coat=coat)
+        posed = fig13_cell(s, r, res=res, spp=spp, pose="offset", calibrations=cals, coat=coat)
         print(f"{s:6.3f} {r:6.3f} {_cell(cells[s, r]):>31} {_cell(hard):>24} {_cell(posed):>24}", flush=True)
 
     print(f"-- render noise: share 0.1, α = {rough[0]}, co-axial, soft; error on the wall / off it, %")
     print(f"{'spp':>6} {'paint':>6} {'wall':>6} {'rest':>6} {'every':>6} {'wall':>6} {'rest':>6} {'naive':>6} "
           f"{'floor':>6}")
     for n in [spp // 8, spp, 2 * spp]:
-        e = cells[0.1, rough[0]] if n == spp else fig13_cell(0.1, rough[0], res=res, spp=n, calibrations=cals)
+        e = (cells[0.1, rough[0]] if n == spp
+             else fig13_cell(0.1, rough[0], res=res, spp=n, calibrations=cals, coat=coat))
         print(f"{n:6d} " + " ".join(f"{100 * e[k]:6.1f}" for k in ("paint", "paint_wall", "paint_rest", "every",
                                                                     "every_wall", "every_rest", "naive", "floor")),
               flush=True)
@@ -627,6 +646,7 @@ def part_fig13_samples(args):
           "(w); then the recolor's error, %: ours / "
           "noise-reduced / noise-aware (Monte Carlo variance) against the every-interaction truth, and against paint; "
           "naive; (two paint truths)")
+    coat = _fig13_coat(args)
     print(f"{'s':>5} {'α':>6} {'spp':>5} {'paper':>6} {'ref':>6} {'floor':>6} {'r':>2} {'dn':>6} {'w':>6} | "
           f"{'every':>6} {'dn':>6} {'trust':>6} | {'paint':>6} {'dn':>6} {'trust':>6} | {'naive':>6} {'(floor)':>7} "
           f"{'time':>6}")
@@ -634,7 +654,7 @@ def part_fig13_samples(args):
     for share, alpha in [(0.0, 0.009), (0.1, 0.009), (0.1, 0.05)]:
         for spp in sweep:
             t = time.perf_counter()
-            e = fig13_cell(share, alpha, res=res, spp=spp, calibrations=cals, components=True, extra=True)
+            e = fig13_cell(share, alpha, res=res, spp=spp, calibrations=cals, coat=coat, components=True, extra=True)
             print(f"{share:5.2f} {alpha:6.3f} {spp:5d} "
                   + " ".join(f"{100 * e[k]:6.2f}" for k in ("paper", "paper_ref", "paper_floor"))
                   + f" {e['radius']:2d} {100 * e['paper_dn']:6.2f} {100 * e['paper_w']:6.2f} | "
@@ -986,6 +1006,9 @@ def main(argv=None) -> int:
                         help="camera pixels a side for cornell (default 64), virtual (128) and edge (48)")
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--fig13-spp", type=int, default=512, help="samples per pixel of fig13's captures")
+    parser.add_argument("--fig13-coat", choices=sorted(FIG13_TINTS), default="tinted",
+                        help="fig13/fig13spp's coat: tinted like the paint (the paper's specular share of the total "
+                             "albedo) or white (the share 16/36/16 %% at s = 0.1)")
     parser.add_argument("--fig13-spp-sweep", type=int, nargs="+", default=[512, 2048, 4096],
                         help="samples per pixel of fig13spp's captures, one cell each")
     parser.add_argument("--fig12-spp", type=int, nargs="+", default=[1024],

@@ -2,8 +2,8 @@
 
 ``devices.open_rig("mitsuba:cornell")`` opens the paper's Fig. 6 box (the geometry of
 ``virtual:cornell``) path-traced by Mitsuba 3; ``mitsuba:wedge`` (Figs. 8 and 13: a glossy
-coat on the left wall, ``specular=`` and ``roughness=`` set it), ``mitsuba:floor`` (Figs. 3
-and 11: a diffuse box on a glossy floor) and ``mitsuba:textured`` (Fig. 12) are the others;
+coat on the left wall, ``specular=``, ``roughness=`` and ``tint=`` set it), ``mitsuba:floor``
+(Figs. 3 and 11: a diffuse box on a glossy floor) and ``mitsuba:textured`` (Fig. 12) are the others;
 ``"mitsuba:/path/rig.json"`` opens a rig file naming any Mitsuba scene and its targets (see
 :mod:`devices.mitsuba.scene`). Unlike the virtual rig, materials need not be Lambertian,
 pixels average their whole footprint (edges are mixed) and the truth is per shape
@@ -43,6 +43,7 @@ _OPTIONS = (
     "max_depth",
     "specular",
     "roughness",
+    "tint",
     "coverage_passes",
     "progress",
 )
@@ -134,6 +135,10 @@ def open_rig(arg: str, **options) -> MitsubaRig:
     specular, roughness : float, optional
         Override the glossy coat(s) named in the rig file (share of specular reflection in
         [0, 1], GGX roughness in (0, 1]).
+    tint : {"white", "albedo"}, optional
+        Override the coats' specular reflectance: white, or the shape's diffuse colour (then
+        ``specular`` is the paper's Fig. 13 share of the total albedo; see
+        :mod:`devices.mitsuba.scene`).
     coverage_passes : int, default 256
         One-sample renders counting each shape's footprint per pixel (targets, coverage).
     progress : callable, optional
@@ -181,7 +186,7 @@ def open_rig(arg: str, **options) -> MitsubaRig:
     depth = _positive_int(options.get("max_depth", 32), "max_depth")
     passes = _positive_int(options.get("coverage_passes", 256), "coverage_passes")
     materials = dict(rig_scene.materials)
-    for key in ("specular", "roughness"):
+    for key in ("specular", "roughness", "tint"):
         if key in options:
             if not materials:
                 raise InputError(f"{key}= needs a rig scene with a glossy coat; {rig_scene.name!r} has none")

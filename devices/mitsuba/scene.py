@@ -17,8 +17,15 @@ textures, lights, camera and offset projector pose; its box faces become shapes
 ``box_front`` ...; its whole-surface targets are the default targets). An XML scene brings
 its own sensor (the camera), its emitters (the light that is not the projector) and its
 shapes; the projector is added by the rig. A glossy coat replaces a shape's diffuse BSDF by
-``(1 - specular) * diffuse + specular * (a rough conductor of reflectance 1, GGX roughness
-alpha)``: the sum of the diffuse and specular weights is 1, as in the paper's Fig. 13.
+``(1 - specular) * diffuse + specular * (a rough conductor of GGX roughness alpha)``: the
+diffuse and specular weights sum to 1. The conductor's reflectance is the coat's ``"tint"``:
+``"white"`` (the default: reflectance 1) or ``"albedo"`` (the shape's diffuse reflectance,
+which must be one uniform colour). Only a tinted coat makes ``specular`` the paper's Fig. 13
+"specular albedo as a share of the total albedo" in every channel; a white coat over a diffuse
+albedo rho has the share ``s / (s + (1 - s) * rho)`` (s = 0.1 over the wedge's (0.6, 0.2, 0.6)
+paint: 16 / 36 / 16 %)::
+
+    "materials": {"left_wall": {"specular": 0.1, "roughness": 0.05, "tint": "albedo"}}
 """
 
 from __future__ import annotations
@@ -162,10 +169,34 @@ def load_rig_scene(name_or_path: str | Path) -> RigScene:
     )
 
 
+TINTS = ("white", "albedo")
+
+
 def check_coat(coat, where: str) -> dict:
-    """Validate a glossy coat ``{"specular": s in [0, 1], "roughness": alpha in (0, 1]}``."""
-    if not isinstance(coat, dict) or sorted(coat) != ["roughness", "specular"]:
-        raise InputError(f"{where} must be {{'specular': s, 'roughness': alpha}}, got {coat!r:.80}")
+    """Validate a glossy coat ``{"specular": s in [0, 1], "roughness": alpha in (0, 1]}`` with an
+    optional ``"tint"`` in :data:`TINTS` (see the module docstring).
+
+    Returns the coat with float weights; ``"tint"`` is kept only when it is not the default white.
+
+    Raises
+    ------
+    InputError
+        A missing or unknown key, a weight out of range, an unknown tint.
+
+    Examples
+    --------
+    >>> check_coat({"specular": 0.1, "roughness": 0.05, "tint": "white"}, "coat")
+    {'specular': 0.1, 'roughness': 0.05}
+    """
+    if (
+        not isinstance(coat, dict)
+        or not {"roughness", "specular"} <= set(coat)
+        or not set(coat) <= {"roughness", "specular", "tint"}
+    ):
+        raise InputError(f"{where} must be {{'specular': s, 'roughness': alpha}} (optional 'tint'), got {coat!r:.80}")
+    tint = coat.get("tint", "white")
+    if tint not in TINTS:
+        raise InputError(f"{where}.tint must be one of {list(TINTS)}, got {tint!r:.40}")
     s, r = coat["specular"], coat["roughness"]
     for name, v, lo_open in (("specular", s, False), ("roughness", r, True)):
         if (
@@ -176,7 +207,8 @@ def check_coat(coat, where: str) -> dict:
             or v > 1
         ):
             raise InputError(f"{where}.{name} must be in {'(0' if lo_open else '[0'}, 1], got {v!r}")
-    return {"specular": float(s), "roughness": float(r)}
+    out = {"specular": float(s), "roughness": float(r)}
+    return out if tint == "white" else dict(out, tint=tint)
 
 
 def shape_id(surface_name: str) -> str:
@@ -218,8 +250,19 @@ def look_at(pose: dict | object, *, mirror: bool):
     return tw @ _mirror() if mirror else tw
 
 
-def coated(diffuse: dict, coat: dict) -> dict:
-    """A diffuse BSDF dict with a glossy coat (see the module docstring)."""
+def coated(diffuse: dict, coat: dict, where: str = "coat") -> dict:
+    """A diffuse BSDF dict with a glossy coat (see the module docstring).
+
+    Raises
+    ------
+    InputError
+        A coat tinted like the albedo over a textured diffuse reflectance.
+    """
+    spec = {"type": "rgb", "value": [1.0, 1.0, 1.0]}
+    if coat.get("tint", "white") == "albedo":
+        if diffuse["reflectance"]["type"] != "rgb":
+            raise InputError(f"{where}: tint 'albedo' needs a uniform diffuse colour, but the shape is textured")
+        spec = dict(diffuse["reflectance"], value=list(diffuse["reflectance"]["value"]))
     return {
         "type": "blendbsdf",
         "weight": float(coat["specular"]),
@@ -229,7 +272,7 @@ def coated(diffuse: dict, coat: dict) -> dict:
             "distribution": "ggx",
             "alpha": float(coat["roughness"]),
             "material": "none",
-            "specular_reflectance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+            "specular_reflectance": spec,
         },
     }
 
@@ -275,7 +318,7 @@ def virtual_scene_dict(scene, materials: dict) -> dict:
         sid = shape_id(name)
         bsdf = {"type": "diffuse", "reflectance": _reflectance(scene, i)}
         if sid in materials:
-            bsdf = coated(bsdf, materials[sid])
+            bsdf = coated(bsdf, materials[sid], f"materials[{sid!r}]")
         shape = {"type": "rectangle", "to_world": _quad_transform(q.origin[i], q.u[i], q.v[i]), "bsdf": bsdf}
         if np.any(scene.emission[i] > 0):
             shape["emitter"] = {

@@ -12,6 +12,7 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 import devices
+from devices.mitsuba.scene import check_coat, coated
 from engine.acquire.predict import relative_error
 from engine.errors import InputError
 
@@ -125,8 +126,9 @@ def test_truth_components_sum_to_the_recolor_truth(rig):
         rig.truth.components(np.zeros_like(mask), 3)
 
 
-def test_truth_repaints_under_a_glossy_coat_or_scales_every_interaction():
-    with devices.open_rig("mitsuba:wedge", ideal=True, specular=0.3, roughness=0.3, **SMALL) as r:
+@pytest.mark.parametrize("tint", ["white", "albedo"])
+def test_truth_repaints_under_a_glossy_coat_or_scales_every_interaction(tint):
+    with devices.open_rig("mitsuba:wedge", ideal=True, specular=0.3, roughness=0.3, tint=tint, **SMALL) as r:
         r.flood()
         flood = r.projector.image
         left = r.targets["left"]
@@ -174,6 +176,47 @@ def test_glossy_coat_is_a_parameter_and_bad_options_are_named():
         devices.open_rig("mitsuba:cornell", spp_per_pixel=3)
     with pytest.raises(InputError, match="unknown mitsuba rig scene"):
         devices.open_rig("mitsuba:nowhere")
+
+
+def test_a_tinted_coat_reflects_the_paints_colour_and_bad_tints_are_named(tmp_path):
+    paint = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.6, 0.2, 0.6]}}
+    white = coated(paint, check_coat({"specular": 0.1, "roughness": 0.05}, "c"))
+    tinted = coated(paint, check_coat({"specular": 0.1, "roughness": 0.05, "tint": "albedo"}, "c"))
+    assert white["specular"]["specular_reflectance"]["value"] == [1.0, 1.0, 1.0]
+    assert tinted["specular"]["specular_reflectance"]["value"] == [0.6, 0.2, 0.6]
+    assert tinted["weight"] == 0.1 and tinted["diffuse"] == paint
+    default = {"specular": 0.1, "roughness": 0.05}
+    assert check_coat(dict(default, tint="white"), "c") == default  # the default tint is not spelt out
+    with pytest.raises(InputError, match=r"c\.tint must be one of \['white', 'albedo'\], got 'gold'"):
+        check_coat({"specular": 0.1, "roughness": 0.05, "tint": "gold"}, "c")
+    with pytest.raises(InputError, match="tint must be one of"):
+        devices.open_rig("mitsuba:wedge", tint="paint", **SMALL)
+    with pytest.raises(InputError, match="optional 'tint'"):
+        check_coat({"specular": 0.1, "roughness": 0.05, "shine": 1}, "c")
+    (tmp_path / "checker.json").write_text(
+        '{"scene": "virtual:textured", "materials": {"checker_wall": {"specular": 0.1, "roughness": 0.1, '
+        '"tint": "albedo"}}}'
+    )
+    with pytest.raises(InputError, match=r"materials\['checker_wall'\]: tint 'albedo' needs a uniform diffuse colour"):
+        devices.open_rig(f"mitsuba:{tmp_path / 'checker.json'}", **SMALL)
+
+
+def test_a_tinted_coat_leaves_the_walls_colour_that_of_its_paint():
+    """Direct light only (max_depth 2): a coat tinted like the paint reflects each channel in
+    proportion to the paint's albedo, so the image over the albedo is grey; a white coat is not."""
+    rho = np.array([0.6, 0.2, 0.6])
+    grey = {}
+    for tint in ("albedo", "white"):
+        opts = dict(SMALL, resolution=(12, 12), max_depth=2)
+        with devices.open_rig("mitsuba:wedge", ideal=True, specular=0.5, roughness=1.0, tint=tint, **opts) as r:
+            r.flood()
+            img = r.truth.photograph(ambient=False, pattern=r.projector.image)
+            wall = (r.coverage["left"] == 1) & (img.sum(-1) > 0)
+            assert wall.sum() > 10
+            per = img[wall] / rho
+            grey[tint] = np.abs(per / per.mean(-1, keepdims=True) - 1).max()
+    assert grey["albedo"] < 1e-4, grey  # the same paths carry all three channels
+    assert grey["white"] > 0.1, grey
 
 
 def test_any_mitsuba_xml_scene_with_a_targets_file(tmp_path):
