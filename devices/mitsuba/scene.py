@@ -7,7 +7,7 @@ A rig file (``resources/mitsuba/NAME.json``, or any path) is a JSON object::
       "description": "...",
       "scene": "virtual:wedge",            # or "scene.xml", relative to this file
       "targets": {"left": ["left_wall"]},  # target name -> shape ids (optional for virtual: scenes)
-      "materials": {"left_wall": {"specular": 0.05, "roughness": 0.1}},   # optional glossy coats
+      "materials": {"left_wall": {"specular": 0.05, "roughness": 0.1}},   # glossy coats (virtual: scenes)
       "projector": {"power": [r, g, b], "offset": {"position": [...], "look_at": [...],
                     "up": [...], "fov_deg": 40}}                          # XML scenes only
     }
@@ -16,7 +16,8 @@ A rig file (``resources/mitsuba/NAME.json``, or any path) is a JSON object::
 textures, lights, camera and offset projector pose; its box faces become shapes
 ``box_front`` ...; its whole-surface targets are the default targets). An XML scene brings
 its own sensor (the camera), its emitters (the light that is not the projector) and its
-shapes; the projector is added by the rig. A glossy coat replaces a shape's diffuse BSDF by
+shapes (their BSDFs too: ``materials`` is refused there); the projector is added by the rig.
+A glossy coat replaces a shape's diffuse BSDF by
 ``(1 - specular) * diffuse + specular * (a rough conductor of GGX roughness alpha)``: the
 diffuse and specular weights sum to 1. The conductor's reflectance is the coat's ``"tint"``:
 ``"white"`` (the default: reflectance 1) or ``"albedo"`` (the shape's diffuse reflectance,
@@ -149,6 +150,9 @@ def load_rig_scene(name_or_path: str | Path) -> RigScene:
         raise InputError(f"{path.name}: materials must map shape ids to {{'specular': s, 'roughness': alpha}}")
     for sid, m in materials.items():
         check_coat(m, f"materials[{sid!r}]")
+    if materials and not scene.startswith("virtual:"):  # the XML's own BSDFs would be used, silently
+        raise InputError(f"{path.name}: materials (glossy coats) apply to virtual: scenes only; give the shapes of "
+                         f"{data['scene']!r} their BSDFs in the XML")
     proj = data.get("projector", {})
     if not isinstance(proj, dict) or sorted(set(proj) - {"power", "offset"}):
         raise InputError(f"{path.name}: projector must be an object with optional 'power' and 'offset'")

@@ -10,14 +10,24 @@ from devices.virtual.scene import SCENE_DIR, load_scene
 from engine.checker import detect_checker, reference_reflectances, sample_patches
 
 
+def _albedos(scene: dict) -> np.ndarray:
+    return np.array([s["albedo"] for s in scene["surfaces"]], np.float64)
+
+
 def test_the_scene_file_is_generated_from_its_definition():
-    assert json.loads((SCENE_DIR / "checker.json").read_text()) == checker_scene()
+    stored, made = json.loads((SCENE_DIR / "checker.json").read_text()), checker_scene()
+    # the albedos come from colour-science's spectra through numpy's sums: equal to the last bits or two,
+    # which differ between numpy builds (a fresh environment's numpy 2.4 moved some by 1 ulp)
+    np.testing.assert_allclose(_albedos(stored), _albedos(made), rtol=1e-12, atol=0)
+    for s in stored["surfaces"] + made["surfaces"]:
+        del s["albedo"]
+    assert stored == made
 
 
 def test_patch_albedos_are_the_reference_reflectances():
     scene = load_scene("checker")
     rho = np.array([scene.albedo[scene.names.index(f"patch_{i + 1:02d}")] for i in range(24)])
-    np.testing.assert_array_equal(rho, reference_reflectances())
+    np.testing.assert_allclose(rho, reference_reflectances(), rtol=1e-12, atol=0)  # to the last bits (above)
 
 
 def test_the_chart_is_found_in_the_virtual_photograph(tmp_path):

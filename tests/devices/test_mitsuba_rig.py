@@ -241,6 +241,11 @@ def test_any_mitsuba_xml_scene_with_a_targets_file(tmp_path):
     (tmp_path / "bad.json").write_text('{"scene": "box.xml", "targets": {"wall": ["nope"]}}')
     with pytest.raises(InputError, match="not in"):
         devices.open_rig(f"mitsuba:{tmp_path / 'bad.json'}", **SMALL)
+    # a coat named for an XML scene would not be applied: refused, not ignored
+    (tmp_path / "coat.json").write_text('{"scene": "box.xml", "targets": {"wall": ["wall"]}, '
+                                        '"materials": {"wall": {"specular": 0.1, "roughness": 0.05}}}')
+    with pytest.raises(InputError, match="apply to virtual: scenes only"):
+        devices.open_rig(f"mitsuba:{tmp_path / 'coat.json'}", **SMALL)
 
 
 def test_available_lists_the_rig_or_says_how_to_install_it(monkeypatch):
