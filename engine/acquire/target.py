@@ -183,7 +183,8 @@ class PreparedTarget:
         filled = f" ({self.filled} undecoded pixels interpolated from their neighbours)" if self.filled else ""
         if self.coverage is not None:
             n_edge = int(((self.coverage > 0) & (self.coverage < 1)).sum())
-            filled += f"; {n_edge} edge pixels (partly target) are recolored from both sides"
+            # how many of them can be split is known once decomposed (engine.workflow.estimated_report)
+            filled += f"; {n_edge} edge pixels are partly target (recolored from both sides where they can be split)"
         if not bad:
             return f"all {painted} target pixels can be re-emitted{filled}"
         return (
