@@ -78,7 +78,8 @@ def assert_overlay_follows_coverage(user: User, target) -> int:
     return int(strong.sum())
 
 
-def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, tmp_path, monkeypatch, dialogs):
+def _small_demo(make_window, qtbot, monkeypatch):
+    """A window showing the demo (Help ▸ Demo) on a small supersampled rig: (window, user)."""
     import app.model.demo
 
     real = app.model.demo.open_demo
@@ -87,6 +88,11 @@ def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, tmp
     window = make_window()
     user = User(qtbot, window)
     user.trigger("demo")
+    return window, user
+
+
+def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, tmp_path, monkeypatch, dialogs):
+    window, user = _small_demo(make_window, qtbot, monkeypatch)
     doc = window.doc
     lst = user.find("targets_list", QListWidget)
     wall = doc.by_name("right_wall")
@@ -203,14 +209,7 @@ def test_the_artist_refines_an_edge_and_the_seam_shrinks(make_window, qtbot, tmp
 def test_a_stray_feathered_dab_is_reported_after_acquiring(make_window, qtbot, monkeypatch, dialogs):
     """The artist's feathered dab lands far from the wall it was meant for: acquiring says that its
     pixels could not be split between target and neighbour (they recolor as not target)."""
-    import app.model.demo
-
-    real = app.model.demo.open_demo
-    monkeypatch.setattr(app.model.demo, "open_demo",
-                        lambda name, **kw: real(name, **dict(kw, resolution=RES, supersample=4)))
-    window = make_window()
-    user = User(qtbot, window)
-    user.trigger("demo")
+    window, user = _small_demo(make_window, qtbot, monkeypatch)
     doc = window.doc
     wall = doc.by_name("right_wall")
     dialogs.answers = [QMessageBox.StandardButton.Yes]
