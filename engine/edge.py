@@ -42,6 +42,8 @@ VOID = 1e-3
 TEXTURE = (0.03, 0.06)
 #: The same for the spread of the strip's extrapolations along the 8 directions over their mean (:func:`_strip`).
 SPREAD = (0.2, 0.4)
+#: Edge pixels with no solid or no outside pixel within ``radius`` try a window this many times wider.
+REACH = 3
 
 
 def check_coverage(name: str, coverage, shape: tuple[int, int]) -> np.ndarray:
@@ -394,7 +396,8 @@ def blend_edges(
     blended = np.zeros((h, w), bool)
     # edge pixels with no solid or no outside pixel that close (slivers) try a wider window; those whose
     # widest window the frame cuts off before any outside pixel border what lies beyond it (``beyond``)
-    for r, beyond in ((int(radius), False), (3 * int(radius), False), (3 * int(radius), True)):
+    wide = REACH * int(radius)
+    for r, beyond in ((int(radius), False), (wide, False), (wide, True)):
         if not (todo & ~blended).any() or k < 2:
             break
         decomposition, done = _blend(decomposition, cov, photo, r, todo & ~blended, int(along), beyond,
@@ -476,11 +479,11 @@ def _blend(
     # where the target reaches the edge in a line, its part is the strip's own components (never more
     # than the pixel holds, so that the neighbour's part stays non-negative and κ = 1 gives I) where the
     # target is smooth and the strip's directions agree; the split's where it is textured or they do not
-    texture = _texture(photo, decomposition.target, fy, fx)
-    split = np.maximum(np.clip((texture - TEXTURE[0]) / (TEXTURE[1] - TEXTURE[0]), 0, 1),
-                       np.clip((spread - SPREAD[0]) / (SPREAD[1] - SPREAD[0]), 0, 1))[None, :, None]
     if smoothed:  # F mixes the neighbour's shares: the split's target part would take them whole
-        split = np.zeros_like(split)
+        split = np.zeros((1, len(vy), 1))
+    else:
+        texture = _texture(photo, decomposition.target, fy, fx)
+        split = np.maximum(_ramp(texture, TEXTURE), _ramp(spread, SPREAD))[None, :, None]
     strip = np.clip(strip, 0, np.maximum(own, 0))
     strip_at = found & ~void
     target_part[:, strip_at] = ((1 - split) * strip + split * target_part)[:, strip_at]
@@ -574,6 +577,11 @@ def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray, np.
     power = (light**2).sum(axis=-1)
     spread = np.where((count > 1) & (power > 0), np.sqrt(deviation / np.where(power > 0, power, 1.0)), 0.0)
     return alpha[None, :, None] * mean, found, spread
+
+
+def _ramp(x: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
+    """0 up to ``bounds[0]``, 1 from ``bounds[1]``, linear between."""
+    return np.clip((x - bounds[0]) / (bounds[1] - bounds[0]), 0, 1)
 
 
 def _texture(photo, inside, ys, xs, radius: int = 2) -> np.ndarray:

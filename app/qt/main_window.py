@@ -201,7 +201,7 @@ class MainWindow(QMainWindow):
         self.exposure_spin.valueChanged.connect(self.colour_panel.refresh)
         self.albedo_panel = AlbedoPanel(document, colour=self.colour_panel)
         # "Link channels" is how the user likes to drag κ, not part of the edit: remembered across documents
-        self.albedo_panel.link.setChecked(str(self.settings.value(LINK_SETTING, "true")).lower() not in ("false", "0"))
+        self.albedo_panel.link.setChecked(self._flag(LINK_SETTING))
         self.albedo_panel.link.toggled.connect(lambda on: self.settings.setValue(LINK_SETTING, bool(on)))
         self.noise_panel = NoiseReductionPanel(document)
         self.noise_panel.apply_requested.connect(self.apply_noise_reduction)
@@ -496,7 +496,11 @@ class MainWindow(QMainWindow):
     # ================================================================== noise-aware recolor
     def noise_aware_default(self) -> bool:
         """The recolor a new acquisition gets: the user's last choice (View ▸ Noise-Aware Recolor), else noise-aware."""
-        return str(self.settings.value(NOISE_AWARE_SETTING, "true")).lower() not in ("false", "0")
+        return self._flag(NOISE_AWARE_SETTING)
+
+    def _flag(self, key: str) -> bool:
+        """A yes/no preference, yes unless the user said no (QSettings stores it as text in an INI file)."""
+        return str(self.settings.value(key, "true")).lower() not in ("false", "0")
 
     def on_noise_aware(self, on: bool) -> None:
         """View ▸ Noise-Aware Recolor: noise-aware or plain recolor for preview and export (one undo step)."""

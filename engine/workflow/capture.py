@@ -12,7 +12,7 @@ from engine.acquire.cascade import CascadeResult
 from engine.calibrate import Calibration, fill_correspondence
 from engine.checks import check_kappa, check_mask
 from engine.decompose import Decomposition
-from engine.edge import check_coverage, is_soft, solid, unblended
+from engine.edge import REACH, check_coverage, is_soft, solid, unblended
 from engine.errors import InputError, SessionError
 from engine.figurate import MAX_ORDER
 from engine.progress import Progress, ShouldStop
@@ -349,6 +349,8 @@ def estimated_report(session: Session) -> str:
         lines.append(f"{n} unreachable target pixels were given the interaction shares of reachable neighbours "
                      f"(engine.fill); {max(left - n, 0)} farther from any keep their colour")
     if m := int(result.get("unblended", 0)):
-        lines.append(f"{m} edge pixels (partly target) have no wholly-target or no outside pixel within 3 pixels to "
-                     "split them by and recolor as not target: paint the target up to them, or harden the edge there")
+        # decomposed with blend_edges' default radius of 1 pixel: its widest window reaches REACH pixels
+        lines.append(f"{m} edge pixels (partly target) have no wholly-target or no outside pixel within {REACH} "
+                     "pixels to split them by and recolor as not target: paint the target up to them, or harden the "
+                     "edge there")
     return "; ".join(lines)
