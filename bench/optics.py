@@ -634,8 +634,8 @@ def part_fig13(args):
 
 
 def part_fig13_samples(args):
-    """Fig. 13's failing cells against samples: no coat and s = 0.1 at α = 0.009 and 0.05, at each
-    ``--fig13-spp-sweep`` (captures; the recolor's truths at 4×, the components at the same spp)."""
+    """Fig. 13's cells ``--fig13-cells`` (by default its failing ones: no coat and s = 0.1 at α = 0.009 and 0.05)
+    at each ``--fig13-spp-sweep`` (captures; the recolor's truths at 4×, the components at the same spp)."""
     res = 24
     sweep = [64, 128] if args.quick else args.fig13_spp_sweep
     print(f"\n== Fig. 13 against samples: mitsuba:wedge {res}², left wall glossy, κ = {FIG13_KAPPA.tolist()}, "
@@ -651,7 +651,7 @@ def part_fig13_samples(args):
           f"{'every':>6} {'dn':>6} {'trust':>6} | {'paint':>6} {'dn':>6} {'trust':>6} | {'naive':>6} {'(floor)':>7} "
           f"{'time':>6}")
     cals: dict = {}
-    for share, alpha in [(0.0, 0.009), (0.1, 0.009), (0.1, 0.05)]:
+    for share, alpha in args.fig13_cells:
         for spp in sweep:
             t = time.perf_counter()
             e = fig13_cell(share, alpha, res=res, spp=spp, calibrations=cals, coat=coat, components=True, extra=True)
@@ -664,6 +664,15 @@ def part_fig13_samples(args):
             print(f"{'':18} per component, ours / floor: " + ", ".join(
                 f"{100 * a:.2f} / {100 * b:.2f}" for a, b in zip(e["paper_each"], e["floor_each"], strict=True)),
                 flush=True)
+
+
+def _share_alpha(text: str) -> tuple[float, float]:
+    """``--fig13-cells``' ``SHARE:ALPHA``, e.g. ``0.03:0.009``, as two floats."""
+    try:
+        share, alpha = (float(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected SHARE:ALPHA such as 0.03:0.009, got {text!r}") from None
+    return share, alpha
 
 
 def part_fig3(args):
@@ -1009,6 +1018,9 @@ def main(argv=None) -> int:
     parser.add_argument("--fig13-coat", choices=sorted(FIG13_TINTS), default="tinted",
                         help="fig13/fig13spp's coat: tinted like the paint (the paper's specular share of the total "
                              "albedo) or white (the share 16/36/16 %% at s = 0.1)")
+    parser.add_argument("--fig13-cells", type=_share_alpha, nargs="+", metavar="SHARE:ALPHA",
+                        default=[(0.0, 0.009), (0.1, 0.009), (0.1, 0.05)],
+                        help="fig13spp's cells: specular share and GGX roughness, e.g. 0.03:0.009")
     parser.add_argument("--fig13-spp-sweep", type=int, nargs="+", default=[512, 2048, 4096],
                         help="samples per pixel of fig13spp's captures, one cell each")
     parser.add_argument("--fig12-spp", type=int, nargs="+", default=[1024],
