@@ -9,10 +9,11 @@ unbiased under noise, which the max/min is not (it overestimates D by about 2σ)
 to projector blur at square edges. Next to a concave corner the global light follows the
 pattern (the corner returns the light of the pixel's own lit square) and that D is too high:
 the part of it that D from every capture does not share, beyond what it is over the rest of the
-target, is taken out (:func:`_pattern_bias`). Target pixels the Gray code could not decode (concave
-corners, grazing angles) get their projector pixel from their decoded neighbours
-(:func:`engine.calibrate.fill_correspondence`). Pixels where D is still near zero (shadowed,
-unlit) cannot be re-emitted: they are removed from the target and reported.
+target, is taken out where the pixel sees its own projector pixel alone (:func:`_pattern_bias`).
+Target pixels the Gray code could not decode (concave corners, grazing angles) get their
+projector pixel from their decoded neighbours (:func:`engine.calibrate.fill_correspondence`).
+Pixels where D is still near zero (shadowed, unlit) cannot be re-emitted: they are removed from
+the target and reported.
 
 A target may be a soft mask (coverage 0–1, :mod:`engine.edge`): only its solid pixels
 (coverage 1) whose projector pixel lights nothing else are re-emitted; its edge pixels are
@@ -255,7 +256,11 @@ def prepare_target(
         recolor of the whole image with κ = (2, 0.125, 8), order 4, 6.43 → 4.47 % (exact D: 2.39 %);
         on the Cornell box's wall (true coverage, 4×4 supersampled) 0.77 → 0.47 % rms,
         noise-aware 0.36 → 0.28 % (exact D: 0.25 %); on the frontal panel D stays within 0.01 %.
-        False: the previous estimate.
+        Only on the pixels that see their own projector pixel alone, as the spread captures
+        measure them (so never with ``spread`` False): a posed projector's other pixels straddle
+        projector pixels, and D from every capture split by their own one is not D (the offset
+        wedge's soft-mask recolor, 24², 4× supersampled: 11.2 % corrected everywhere, 1.43 % so,
+        1.48 % uncorrected). False: the previous estimate.
 
     Returns
     -------
@@ -373,19 +378,22 @@ def prepare_target(
         neighbour_d = cv2.dilate(solid_d, np.ones((3, 3), np.uint8))  # the brightest solid neighbour's D
         real = (direct > 2 * sigma) & (direct > EDGE_DIRECT_FLOOR * neighbour_d)
         edge_direct = np.where(edge_px[:, :, None] & real, direct, 0).astype(np.float32)
-    if pattern_bias:  # the checkerboards' own global light, which concave corners return (see _pattern_bias)
-        bias = _pattern_bias(excess, excess_var if known else None, direct, usable)
-        direct = direct - bias
-        if per_channel:
-            for c in range(3):
-                matrix[..., c, c] -= bias[..., c]
+    weights = None
+    if spread:
+        lit_direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
+        if edge_direct is not None:
+            lit_direct += edge_direct
+        weights = _measure_spread(recorder, calibration, corr, usable | edge_px, lit_direct, footprint, base, name)
+        if pattern_bias:  # the checkerboards' own global light, which concave corners return (see _pattern_bias)
+            # only where the pixel sees its own projector pixel alone: what D from every capture assumes
+            bias = _pattern_bias(excess, excess_var if known else None, direct, usable & (weights[..., 1, 1] >= 1))
+            direct = direct - bias
+            if per_channel:
+                for c in range(3):
+                    matrix[..., c, c] -= bias[..., c]
     direct = np.where(usable[:, :, None], direct, 0).astype(np.float32)
     direct_matrix = np.where(usable[:, :, None, None], matrix, 0).astype(np.float32) if per_channel else None
     direct_variance = np.where(usable[:, :, None], variance, 0).astype(np.float32) if known else None
-    weights = None
-    if spread:
-        lit_direct = direct if edge_direct is None else direct + edge_direct
-        weights = _measure_spread(recorder, calibration, corr, usable | edge_px, lit_direct, footprint, base, name)
     return PreparedTarget(usable, target & ~usable, direct, corr, int((filled & usable).sum()), direct_matrix,
                           direct_variance, coverage, weights, edge_direct)
 
@@ -516,7 +524,8 @@ def _pattern_bias(excess, excess_var, direct, usable) -> np.ndarray:
     projector pixel alone (``excess = D − D_every``), correlates its neighbourhood with its
     own state less and sees less of that light; over a flat wall ``excess / D`` is the same
     everywhere (projector blur, the residual global light at the checkerboard's frequency):
-    the target's median, per channel. What stands out of it beyond twice its noise
+    the median over ``usable`` (the pixels that see their own projector pixel alone), per
+    channel. What stands out of it beyond twice its noise
     (``excess_var``; every pixel without it) is the bias: its regression on D's real error
     has slope 1.01 on the grazing wall and 1.03 on the Cornell wall, correlation 0.87 / 0.82.
     D moves by at most a tenth (the largest bias measured is 6.4 %): where the estimate says more
