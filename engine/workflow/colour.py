@@ -141,7 +141,8 @@ def target_direct(session: Session, mask) -> np.ndarray | None:
     """The D measured on the painted pixels ``mask``, or None if it never was.
 
     A session captured before D was kept gets it recomputed from its own captures (no rig
-    needed) and stored, when it can be written.
+    needed; its spread captures too, where it holds them: they decide where D's corner bias is
+    taken out, :func:`engine.acquire.prepare_target`) and stored, when it can be written.
 
     Parameters
     ----------
@@ -165,8 +166,9 @@ def target_direct(session: Session, mask) -> np.ndarray | None:
     name = plan["targets"][plan["masks"].index(digest)]
     base = session.read_capture(f"{_ACQUISITION}-black" if plan["photograph_pattern"] else f"{_ACQUISITION}-photograph")
     recorder = Recorder(_OfflineRig.of(session), session)
-    direct = prepare_target(recorder, load_calibration(session), mask, base, name=f"{_ACQUISITION}-{name}",
-                            spread=False).direct
+    stem = f"{_ACQUISITION}-{name}"  # with its spread captures, which say where D's corner bias is taken out
+    direct = prepare_target(recorder, load_calibration(session), mask, base, name=stem,
+                            spread=session.has_capture(f"{stem}-spread-0")).direct
     try:
         session.write_array(COLOUR_GROUP, direct_array(digest), direct)
     except (OSError, SessionError):

@@ -254,3 +254,30 @@ def test_on_a_grazing_wall_only_the_direct_image_is_not_exact(cache):
         keep = ~r.truth.emitters()
         truth = r.truth.recolor([(mask, blue)])
         assert _error(recolor(acq.target.decompose(acq.observations), blue)[keep], truth[keep]) < 2e-3
+
+
+def test_the_checkerboards_own_light_returned_by_concave_corners_is_taken_out_of_the_direct_image(cache):
+    """D on the checker scene's grazing wall between concave corners, against the rig's exact D (ideal rig, 48²).
+
+    The corners return the light of a pixel's own lit checkerboard square, which the separation
+    takes for direct light: 0.545 % rms (5.0 % at most) without the correction, 0.26 % with it, and
+    the noise-aware recolor with κ = (2, 0.125, 8) 6.43 → 4.47 % (exact D: 2.39 %). The frontal panel
+    on the back wall, away from corners, keeps its D (within 0.01 % of the exact one either way).
+    """
+    from engine.acquire import calibrate_rig
+    from engine.acquire.target import prepare_target
+    from engine.trust import recolor_trusted
+
+    with devices.open_rig("virtual:checker", ideal=True, resolution=RES, cache_dir=cache) as r:
+        rec = Recorder(r, None)
+        cal = calibrate_rig(rec, rig_name=r.identity)
+        base = rec.capture("black", rec.black())
+        for name, bound in (("right_wall", 3.5e-3), ("panel", 1e-4)):
+            p = prepare_target(rec, cal, r.targets[name], base, name=name)
+            error = p.direct[p.mask] / r.truth.direct(p.mask)[p.mask] - 1
+            assert np.sqrt(np.mean(error**2)) < bound, name
+        mask = r.targets["right_wall"]
+        acq = acquire_single(rec, cal, mask, 4, name="wall")
+        keep = ~r.truth.emitters()
+        aware = recolor_trusted(acq.target.trust(acq.observations, acq.covariance), KAPPA).image
+        assert _error(aware[keep], r.truth.recolor([(mask, KAPPA)])[keep]) < 5.5e-2

@@ -139,9 +139,11 @@ def test_the_wall_with_its_edge_is_recolored_almost_as_well_as_its_interior(tmp_
         for kappa in (KAPPA, np.array([2.0, 0.125, 8.0])):
             ours, truth = recolor(d, kappa), rig.truth.recolor([(hard, kappa)])
             ratio[kappa[2]] = relative_error(ours, truth, wall) / relative_error(ours, truth, interior)
-    # measured at 48²: 1.74 and 2.23 (the edge's target part taken as what the neighbour's shares leave:
-    # 2.13 and 4.90); the rest is the solid pixels beside the edge, whose stand-in is a pixel away
-    assert ratio[0.8] < 1.9 and ratio[8.0] < 2.6, ratio
+    # measured at 48²: 1.95 and 2.96, the wall 0.14 % and 0.66 % (before D's corner bias was taken out,
+    # prepare_target's pattern_bias: 1.74 and 2.23, the wall 0.24 % and 0.93 %: the interior gained more;
+    # the edge's target part taken as what the neighbour's shares leave: 2.13 and 4.90); the rest is the
+    # solid pixels beside the edge, whose stand-in is a pixel away
+    assert ratio[0.8] < 2.1 and ratio[8.0] < 3.2, ratio
     # noise reduction (as κ_B = 8 needs on a real camera) leaves the blended edge pixels alone: filtered with
     # the neighbour's pixels they took its shares (measured at 48²: 1.26 kept, 3.87 filtered)
     assert d.blended is not None and d.blended.sum() == ((cov > 0) & (cov < 1)).sum()
