@@ -407,8 +407,9 @@ def recolor_trusted(trusted: TrustedDecomposition, kappa) -> TrustedRecolor:
     squared bias it removes against the variance it adds (pixels weighted by ``1/I²``,
     relative errors, so a lamp does not decide); the first step that does not ends it. Lower orders' components are far
     less noisy, so capturing more orders does not blow the result up as it does the plain recolor's; on noise-free
-    data, though, a step whose float32 rounding (amplified by κ^K) is all it changes still "pays", and a higher
-    order can come out slightly worse (a known defect, ``tests/engine/test_trust.py``). ``sigma`` adds to the
+    data, though, a smoothed share's systematic error (D's bias: spatially smooth, so smoothing does not average
+    it) can be 3–10× its predicted σ, a step that only moves that error still "pays", and a higher order
+    can come out slightly worse (a known defect, ``tests/engine/test_trust.py``). ``sigma`` adds to the
     chosen candidate's variance the bias it leaves against the next candidate, mapped
     locally.
     """

@@ -72,16 +72,18 @@ def test_strong_kappa_does_not_blow_up_with_more_orders_captured(ideal_cornell_e
     assert trusted[0] < 0.5 * plain[0]  # the truncated tail put back at low order
 
 
-# Known defect of the noise-aware order choice (engine.trust.recolor_trusted): on noise-free data
-# every step whose change exceeds its (near-zero) variance "pays", float32 rounding amplified by
-# κ^K included, so a higher captured order can come out slightly worse. D's corner bias (0.2255 %
-# whole-image error at 64²) used to hide it; with D's corner correction the errors halve and the
-# rise shows (64²: order 8 at 0.1215 % against the plain recolor's best 0.1202 %; 128²: order
-# 5 → 6 0.0394 → 0.0429 %), and with the rig's exact D (an oracle) it is larger still (64²:
-# 0.0069 % at order 5 → 0.0178 % at 6 → 0.0214 % at 8). Strict: fixing the order choice makes
-# these pass, and then the markers go.
+# Known defect of the noise-aware order choice (engine.trust.recolor_trusted): a step "pays" when its change
+# exceeds the variance it adds, and on noise-free data the variance of a smoothed share is far below its
+# actual error, which is systematic and spatially smooth (D's bias, the edge's stand-in), so smoothing does not
+# average it while the predicted variance is divided by the window's size (64², K = 8, off the wall: green
+# shares 4 and 6 off by 3.2e-4 and 6.6e-5 of the photograph against predicted σ 1.2e-4 and 6.2e-6). A higher
+# captured order can then come out slightly worse: 64² order 8 at 0.1215 % against the plain recolor's best
+# 0.1202 %; 128² order 5 → 6 0.0394 → 0.0429 %; with the rig's exact D (an oracle) 64² 0.0069 % at order 5 →
+# 0.0178 % at 6. Not float32 rounding: a rounding floor of 1e-7 or 1e-6 of the photograph per share in the
+# choice only moves 64² order 8 to 0.1210 % (bound 0.1208 %). Strict: fixing the order choice makes these pass,
+# and then the markers go.
 ORDER_CHOICE_DEFECT = pytest.mark.xfail(
-    strict=True, reason="noise-aware order choice takes float32 rounding for bias on noise-free data")
+    strict=True, reason="noise-aware order choice takes systematic share errors for bias on noise-free data")
 
 
 @ORDER_CHOICE_DEFECT
