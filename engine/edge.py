@@ -49,6 +49,8 @@ DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -
 #: How much worse (relative squared residual of the compositing equation) a pair of side colours may explain a
 #: pixel than the best pair and still count in :func:`refine_mask`'s coverage: ``e``-fold less per this much.
 RESIDUAL = 1e-3
+#: Boundary pixels :func:`refine_mask` unmixes at a time (64 colour pairs each: ~13 MB an array).
+CHUNK = 1 << 13
 
 
 def check_coverage(name: str, coverage, shape: tuple[int, int]) -> np.ndarray:
@@ -255,11 +257,26 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
     if not near.any():
         return out if room is None else np.minimum(out, room)
     ys, xs = np.nonzero(near)
-    img = np.pad(photo.astype(np.float64), ((3, 3), (3, 3), (0, 0)), mode="edge")
-    pixel = photo[ys, xs].astype(np.float64)
+    img = np.pad(photo, ((3, 3), (3, 3), (0, 0)), mode="edge")
+    for start in range(0, ys.size, CHUNK):  # the pairs' arrays are 64 per pixel: bounded memory
+        y, x = ys[start:start + CHUNK], xs[start:start + CHUNK]
+        alpha, ok = _unmix(img, sure_in, sure_out, y, x, contrast)
+        out[y[ok], x[ok]] = alpha[ok]
+    out[out <= snap] = 0.0
+    out[out >= 1.0 - snap] = 1.0
+    return out if room is None else np.minimum(out, room)
+
+
+def _unmix(img: np.ndarray, sure_in: np.ndarray, sure_out: np.ndarray, ys: np.ndarray, xs: np.ndarray,
+           contrast: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`refine_mask`'s coverage at pixels ``(ys, xs)`` of the padded photograph ``img``, and where it has one.
+
+    Every pair of an inside and an outside colour (:func:`_side_colours`) whose colours differ by more than
+    ``contrast`` gives its least-squares α; the pairs are weighted by how well they explain the pixel.
+    """
+    pixel = img[ys + 3, xs + 3].astype(np.float64)
     a, has_a = _side_colours(img, sure_in, ys, xs)
     b, has_b = _side_colours(img, sure_out, ys, xs)
-    # every pair of an inside and an outside colour: its least-squares α and how well it explains the pixel
     diff = a[:, None] - b[None]  # (8, 8, N, C)
     d2 = (diff * diff).sum(axis=-1)
     scale = np.maximum((a * a).sum(axis=-1)[:, None], (b * b).sum(axis=-1)[None])
@@ -270,11 +287,7 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
     ok = good.any(axis=(0, 1))
     best = np.where(ok, residual.min(axis=(0, 1)), 0.0)
     weight = np.where(good, np.exp(-(np.where(good, residual, 0.0) - best) / RESIDUAL), 0.0)
-    refined = (weight * alpha).sum(axis=(0, 1)) / np.where(ok, weight.sum(axis=(0, 1)), 1.0)
-    out[ys[ok], xs[ok]] = refined[ok]
-    out[out <= snap] = 0.0
-    out[out >= 1.0 - snap] = 1.0
-    return out if room is None else np.minimum(out, room)
+    return (weight * alpha).sum(axis=(0, 1)) / np.where(ok, weight.sum(axis=(0, 1)), 1.0), ok
 
 
 def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -290,24 +303,25 @@ def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndar
     (8, N, C) float64, (8, N) bool
         The colours, and which directions have one.
     """
-    h, w = sure.shape
     s = np.pad(sure, 3)
-    n, c = ys.size, img.shape[-1]
-    colours, found = np.zeros((8, n, c)), np.zeros((8, n), bool)
+    colours, found = np.zeros((8, ys.size, img.shape[-1])), np.zeros((8, ys.size), bool)
+    along = []
     for k, (dy, dx) in enumerate(DIRECTIONS):
         at = [(ys + 3 + i * dy, xs + 3 + i * dx) for i in range(4)]
+        on = [s[q] for q in at]
+        val = [img[q].astype(np.float64) for q in at]
+        along.append((on, val))
         for i, j in ((1, 2), (2, 3), (1, 3)):  # the nearest two along d
-            take = s[at[i]] & s[at[j]] & ~found[k]
-            colours[k, take] = img[at[i]][take] + (img[at[i]][take] - img[at[j]][take]) * (i / (j - i))
+            take = on[i] & on[j] & ~found[k]
+            colours[k, take] = val[i][take] + (val[i][take] - val[j][take]) * (i / (j - i))
             found[k] |= take
     alone = ~found.any(axis=0)
-    for k, (dy, dx) in enumerate(DIRECTIONS):
+    for k, (on, val) in enumerate(along):
         for i in (1, 2, 3):  # the nearest one along d
-            take = alone & s[ys + 3 + i * dy, xs + 3 + i * dx] & ~found[k]
-            colours[k, take] = img[ys + 3 + i * dy, xs + 3 + i * dx][take]
+            take = alone & on[i] & ~found[k]
+            colours[k, take] = val[i][take]
             found[k] |= take
     return colours, found
-
 
 def blend_edges(
     decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0, smoothed: bool = False

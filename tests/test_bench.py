@@ -22,6 +22,7 @@ QUICK = {
     "preview.py": ["--height", "1440", "--width", "2560", "--order", "2", "--events", "3"],
     "overlay.py": ["--size", "64", "--moves", "12", "--brush", "8"],
     "trusted.py": ["--size", "32", "40", "--order", "2", "--repeats", "1"],
+    "refine.py": ["--quick"],
 }
 
 

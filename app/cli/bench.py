@@ -9,7 +9,7 @@ from pathlib import Path
 from engine.errors import InputError
 
 NAMES = ("solve", "recolor", "rig", "preview", "paper", "graycode", "denoise", "albedo", "loopback", "session",
-         "optics", "overlay", "trusted", "bound")
+         "optics", "overlay", "trusted", "bound", "refine")
 
 
 def add_arguments(parser) -> None:
