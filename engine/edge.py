@@ -323,6 +323,7 @@ def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndar
             found[k] |= take
     return colours, found
 
+
 def blend_edges(
     decomposition: Decomposition, coverage, photograph, *, radius: int = 1, along: int = 0, smoothed: bool = False
 ) -> tuple[Decomposition, np.ndarray]:
