@@ -76,6 +76,19 @@ def test_refine_mask_unmixes_an_edge_between_two_textures():
     np.testing.assert_allclose(cov, alpha, atol=0.02)
 
 
+def test_refine_mask_gives_the_same_coverage_whatever_its_chunk(monkeypatch):
+    """The boundary is unmixed a chunk of pixels at a time (bounded memory): chunks of 5 pixels give exactly the
+    coverage of one chunk holding them all."""
+    import engine.edge
+
+    alpha, photo = _two_sides(h=24)
+    photo = photo * np.linspace(0.5, 1.5, 24, dtype=np.float32)[:, None, None]  # a gradient down the edge
+    whole = refine_mask(alpha >= 0.5, photo, snap=0.0)
+    monkeypatch.setattr(engine.edge, "CHUNK", 5)
+    np.testing.assert_array_equal(refine_mask(alpha >= 0.5, photo, snap=0.0), whole)
+    assert not np.array_equal(whole, (alpha >= 0.5).astype(np.float32))
+
+
 def test_refine_mask_keeps_pixels_without_contrast_and_far_from_the_edge():
     photo = np.full((8, 8, 3), 0.5, np.float32)
     m = np.zeros((8, 8), bool)
