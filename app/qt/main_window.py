@@ -407,7 +407,12 @@ class MainWindow(QMainWindow):
             return
         uid = self.doc.current
         before = self.doc.history.count()
-        self._guard(self.doc.refine_edge, uid)
+        # synchronous (a fraction of a second for a target's outline; seconds for 10⁵ boundary pixels): say so
+        QApplication.setOverrideCursor(Qt.CursorShape.WaitCursor)
+        try:
+            self._guard(self.doc.refine_edge, uid)
+        finally:
+            QApplication.restoreOverrideCursor()
         if self.doc.history.count() != before:
             t = self.doc.target(uid)
             self.statusBar().showMessage(f"{t.name!r}: {t.edge_pixels()} edge pixels are partly target", 5000)

@@ -72,3 +72,30 @@ def test_an_export_that_needs_clipping_says_so_by_its_type(acquired_doc, tmp_pat
     with pytest.raises(files.NeedsClipping, match="allow clipping"):
         files.export_image(acquired_doc, tmp_path / "x.tif", dtype="uint16", exposure=8.0)
     assert files.export_image(acquired_doc, tmp_path / "x.tif", dtype="uint16", exposure=8.0, clip=True).exists()
+
+
+def test_refine_edge_shows_a_busy_cursor_while_it_works(make_window, qtbot, monkeypatch, tmp_path):
+    """Refine Edge runs on the window's thread (seconds on a long outline): the wait cursor shows meanwhile and is
+    gone afterwards, also when the refinement refuses."""
+    from PySide6.QtCore import Qt
+    from PySide6.QtWidgets import QApplication
+
+    from app.model.document import Document
+    from engine import imageio
+    from engine.errors import InputError
+
+    imageio.write_image(tmp_path / "photo.png", np.full((12, 16, 3), 128, np.uint8))
+    window = make_window()
+    user = User(qtbot, window)
+    assert window.open_path(tmp_path / "photo.png")
+    user.trigger("add_target")
+    seen = []
+
+    def refine(doc, uid):
+        seen.append(QApplication.overrideCursor().shape())
+        raise InputError("no photograph to refine from")
+
+    monkeypatch.setattr(Document, "refine_edge", refine)
+    user.trigger("refine_edge")
+    assert seen == [Qt.CursorShape.WaitCursor] and QApplication.overrideCursor() is None
+    assert "no photograph to refine from" in window.statusBar().currentMessage()
