@@ -246,7 +246,6 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
     room = None
     if claimed is not None:
         room = 1.0 - check_coverage("claimed", claimed, mask.shape)
-    h, w = mask.shape
     m8 = mask.astype(np.uint8)
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     sure_in = cv2.erode(m8, cross, borderType=cv2.BORDER_REPLICATE) > 0
@@ -257,10 +256,11 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
     if not near.any():
         return out if room is None else np.minimum(out, room)
     ys, xs = np.nonzero(near)
-    img = np.pad(photo, ((3, 3), (3, 3), (0, 0)), mode="edge")
+    img = np.pad(photo, ((3, 3), (3, 3), (0, 0)), mode="edge")  # padded once, like the two sides: read per chunk
+    sides = np.pad(sure_in, 3), np.pad(sure_out, 3)
     for start in range(0, ys.size, CHUNK):  # the pairs' arrays are 64 per pixel: bounded memory
         y, x = ys[start:start + CHUNK], xs[start:start + CHUNK]
-        alpha, ok = _unmix(img, sure_in, sure_out, y, x, contrast)
+        alpha, ok = _unmix(img, *sides, y, x, contrast)
         out[y[ok], x[ok]] = alpha[ok]
     out[out <= snap] = 0.0
     out[out >= 1.0 - snap] = 1.0
@@ -269,7 +269,8 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
 
 def _unmix(img: np.ndarray, sure_in: np.ndarray, sure_out: np.ndarray, ys: np.ndarray, xs: np.ndarray,
            contrast: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`refine_mask`'s coverage at pixels ``(ys, xs)`` of the padded photograph ``img``, and where it has one.
+    """:func:`refine_mask`'s coverage at pixels ``(ys, xs)``, and where it has one (``img``, ``sure_in`` and
+    ``sure_out`` padded by 3).
 
     Every pair of an inside and an outside colour (:func:`_side_colours`) whose colours differ by more than
     ``contrast`` gives its least-squares α; the pairs are weighted by how well they explain the pixel.
@@ -286,14 +287,14 @@ def _unmix(img: np.ndarray, sure_in: np.ndarray, sure_out: np.ndarray, ys: np.nd
     residual = np.where(good, (miss * miss).sum(axis=-1) / np.where(good, scale, 1.0), np.inf)
     ok = good.any(axis=(0, 1))
     best = np.where(ok, residual.min(axis=(0, 1)), 0.0)
-    weight = np.where(good, np.exp(-(np.where(good, residual, 0.0) - best) / RESIDUAL), 0.0)
+    weight = np.exp(-(residual - best) / RESIDUAL)  # 0 for the pairs that are not good (an infinite residual)
     return (weight * alpha).sum(axis=(0, 1)) / np.where(ok, weight.sum(axis=(0, 1)), 1.0), ok
 
 
 def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One side's colour at pixels ``(ys, xs)`` along each of the 8 directions (:func:`refine_mask`).
 
-    ``img`` is the photograph padded by 3, ``sure`` the side's pixels not on the boundary.
+    ``img`` is the photograph padded by 3, ``sure`` the side's pixels not on the boundary, padded by 3 with False.
     Along a direction ``d``: the linear extrapolation of the nearest two of ``p + d, p + 2d,
     p + 3d`` on the side; a pixel with no such pair along any direction (the frame's edge, a
     sliver one pixel wide) takes instead the nearest one along each direction.
@@ -303,13 +304,12 @@ def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndar
     (8, N, C) float64, (8, N) bool
         The colours, and which directions have one.
     """
-    s = np.pad(sure, 3)
     colours, found = np.zeros((8, ys.size, img.shape[-1])), np.zeros((8, ys.size), bool)
     along = []
     for k, (dy, dx) in enumerate(DIRECTIONS):
-        at = [(ys + 3 + i * dy, xs + 3 + i * dx) for i in range(4)]
-        on = [s[q] for q in at]
-        val = [img[q].astype(np.float64) for q in at]
+        at = {i: (ys + 3 + i * dy, xs + 3 + i * dx) for i in (1, 2, 3)}  # 1, 2 and 3 steps along d
+        on = {i: sure[q] for i, q in at.items()}
+        val = {i: img[q].astype(np.float64) for i, q in at.items()}
         along.append((on, val))
         for i, j in ((1, 2), (2, 3), (1, 3)):  # the nearest two along d
             take = on[i] & on[j] & ~found[k]
