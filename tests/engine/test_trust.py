@@ -239,3 +239,26 @@ def test_blended_edge_pixels_are_smoothed_apart_from_the_neighbours_pixels(noisy
     assert not np.array_equal(moved[:, ring], base[:, ring])
     mixed = prepare_trust([replace(d, components=spiked)], photo).levels[0].shares  # as before: read by the neighbour
     assert not np.array_equal(mixed[:, others & ~target], base[:, others & ~target])
+
+
+def test_a_decay_ratio_too_uncertain_for_its_tail_is_not_used():
+    """The realistic Cornell box at 128², camera-noise seed 2, κ_B = 8: the blue component-2 sum over the wall read
+    0.126 ± 0.040 (the noise-free rig's: 0.022), 3.2 σ, and its ratio 0.096 (against ~0.02) made the tail
+    Σ (κρ)^m 3.3 instead of ~0.2: whole image 6.7 % instead of 2.7 %. The tail's relative uncertainty there,
+    the ratio's (0.33) over 1 − κρ, is 1.4; the next pair (order 3's components 1 / 0) is used instead."""
+    from engine.trust import TrustLevel, _tail_ratio
+
+    def level(sums, sds):
+        n = len(sums) - 1
+        zeros = np.zeros((n, 1, 1, 1), np.float32)
+        packed = np.zeros((n * (n + 1) // 2, 1, 1, 1), np.float32)
+        return TrustLevel(zeros, packed, zeros, np.array([sums, sds], np.float64)[:, :, None])
+
+    measured = [level([74.074, 1.515], [0.092, 0.079]), level([74.143, 1.378, 0.069], [0.090, 0.077, 0.008]),
+                level([74.162, 1.320, 0.126, -0.019], [0.091, 0.089, 0.040, 0.011])]
+    assert _tail_ratio(measured, 0, 8.0) == pytest.approx(1.378 / 74.143)
+    # a weak edit barely extrapolates: the same ratio is precise enough for κ = 0.125 (κρ = 0.012)
+    assert _tail_ratio(measured, 0, 0.125) == pytest.approx(0.126 / 1.320)
+    precise = [level(lv.sums[0, :, 0], lv.sums[1, :, 0] / 100) for lv in measured]
+    assert _tail_ratio(precise, 0, 8.0) == pytest.approx(0.126 / 1.320)
+    assert _tail_ratio([level([74.0, 1.5], [0.1, 2.0])], 0, 2.0) == 0.0  # nothing known: no tail
