@@ -121,6 +121,7 @@ def denoise_components(decomposition: Decomposition, photograph, *, radius: int 
     return Decomposition(
         comps.astype(dtype), unreached.astype(dtype), decomposition.target, decomposition.constraint,
         decomposition.unreached_light, decomposition.residual, blended=decomposition.blended,
+        observed=decomposition.observed,
     )
 
 

@@ -570,6 +570,7 @@ def _blend(
         residual,
         decomposition.covariance,  # an edge pixel keeps its unknowns' variance: its light is only re-divided
         blended if decomposition.blended is None else decomposition.blended | blended,
+        decomposition.observed,
     ), blended
 
 

@@ -119,5 +119,5 @@ def fill_unreachable(
             mean = cv2.boxFilter(ratio, -1, size, normalize=False, borderType=cv2.BORDER_CONSTANT)[vy, vx] / count
             covariance[p, fy, fx] = (np.square(light[vy, vx]) * mean).astype(covariance.dtype)
     result = Decomposition(components, unreached, reach | filled, decomposition.constraint,
-                           decomposition.unreached_light, residual, covariance)
+                           decomposition.unreached_light, residual, covariance, observed=decomposition.observed)
     return result, filled

@@ -28,10 +28,11 @@ __all__ = [
 ]
 
 #: Bump when the decomposition's maths or its cache layout change: cached results of older code are recomputed.
-DECOMPOSITION_VERSION = 7  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
+DECOMPOSITION_VERSION = 8  # 3: a soft mask's blended edge pixels are kept (noise reduction leaves them out);
 # 4: a soft mask is noise-reduced before its edge blend; 5: and its edge pixels' neighbour shares along the edge;
 # 6: edge pixels against a void (or the frame's border) are wholly target; 7: edge pixels beside a textured target
-# (or where the strip's directions disagree) take the radiance split, unless noise-reduced before the blend
+# (or where the strip's directions disagree) take the radiance split, unless noise-reduced before the blend;
+# 8: a decomposition keeps its observations summed over the target (Decomposition.observed)
 
 
 def decomposition_key(session: Session) -> str:

@@ -125,3 +125,25 @@ def test_bad_constraint(stack):
     obs, *_, target = stack(2)
     with pytest.raises(InputError, match="constraint must be one of"):
         decompose(obs, target, constraint="monotone")
+
+
+def test_the_observations_summed_over_the_target_are_kept_where_they_still_hold(stack):
+    """``observed`` is Eq. 6's left side for the whole target, untouched by the constraint (which clips noisy
+    components at 0, a bias up): kept through the session cache, noise reduction and the edge blend; a crop,
+    whose target is another, has none."""
+    from engine.denoise import denoise_components
+    from engine.edge import blend_edges
+
+    obs, *_, target = stack(4, seed=3)
+    noisy = obs + np.random.default_rng(3).normal(0, 0.02, obs.shape).astype(obs.dtype)
+    d = decompose(noisy, target)
+    expected = noisy[:, target].astype(np.float64).sum(axis=1)
+    np.testing.assert_allclose(d.observed, expected, rtol=1e-12)
+    np.testing.assert_array_equal(Decomposition.from_arrays(d.to_arrays()).observed, d.observed)
+    np.testing.assert_array_equal(denoise_components(d, noisy[0], radius=1).observed, d.observed)
+    coverage = target.astype(np.float32)
+    coverage[~target & np.roll(target, 1, axis=1)] = 0.5
+    np.testing.assert_array_equal(blend_edges(d, coverage, noisy[0])[0].observed, d.observed)
+    assert d.crop(0, 5, 0, 5).observed is None
+    with pytest.raises(InputError, match="observed must be None or a float array of shape"):
+        Decomposition(d.components, d.unreached, d.target, observed=np.zeros((3, 3)))
