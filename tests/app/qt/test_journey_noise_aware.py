@@ -43,6 +43,9 @@ def test_the_artist_edits_with_the_noise_aware_recolor_and_exports_it(realistic_
     assert abs(wall.kappa[2] - 8.0) < 0.2
     kappa = wall.kappa.copy()
     user.wait_until(lambda: _shows(window, "recolored", kappa))
+    # the paper's edit converges: no false warning from clipped noise (the limit read 5.9, "diverges")
+    message = window.statusBar().currentMessage()
+    assert "diverges" not in message and "has not converged" not in message, message
     exposure = user.find("display_exposure").value()
     expected = recolor_trusted(trusted, kappa)
     np.testing.assert_array_equal(window.canvas.frame.linear, expected.image)  # 48²: the preview is full size
