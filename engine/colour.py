@@ -28,7 +28,6 @@ from engine.checks import check_float_image, check_kappa
 from engine.decompose import Decomposition
 from engine.errors import InputError
 from engine.figurate import transport_matrix
-from engine.noise import packed_index
 
 __all__ = [
     "Convergence",
@@ -459,13 +458,12 @@ def kappa_limit(decomposition: Decomposition) -> np.ndarray:
     >>> kappa_limit(d).round(3).tolist()
     [5.0, 5.0, 5.0]
     """
-    sums = _inside_sums(decomposition)
+    sums, cov = _target_sums(decomposition)
     k = sums.shape[0]
     if k < 2:
         return np.full(sums.shape[1], np.inf)
     a = transport_matrix(k)
     obs = a @ sums if decomposition.observed is None else decomposition.observed.astype(np.float64)
-    cov = _inside_sum_covariance(decomposition)
     obs_cov = None if cov is None else np.einsum("ri,ijc,sj->rsc", a, cov, a)
     growth = np.array([_growth(obs[:, c], None if obs_cov is None else obs_cov[..., c]) for c in range(obs.shape[1])])
     with np.errstate(divide="ignore"):
@@ -615,11 +613,10 @@ def convergence(decomposition: Decomposition, kappa, *, threshold: float = CONVE
     """
     if not isinstance(threshold, (int, float)) or not 0 < threshold < 1:
         raise InputError(f"threshold must be a fraction in (0, 1), got {threshold!r}")
-    sums = _inside_sums(decomposition)
+    sums, cov = _target_sums(decomposition)
     k = sums.shape[0]
     if decomposition.observed is not None:  # the constraint clips noisy components at 0: a bias up
         sums = np.linalg.solve(transport_matrix(k), decomposition.observed.astype(np.float64))
-    cov = _inside_sum_covariance(decomposition)
     last = sums[-1] if cov is None else np.maximum(sums[-1] - EVIDENCE * np.sqrt(np.maximum(cov[-1, -1], 0)), 0)
     kap = check_kappa(kappa, sums.shape[1])
     weights = kap[None, :] ** np.arange(1, k + 1)[:, None]
@@ -630,24 +627,11 @@ def convergence(decomposition: Decomposition, kappa, *, threshold: float = CONVE
     return Convergence(share, np.nan_to_num(ratio, nan=0.0), float(threshold), k)
 
 
-def _inside_sums(decomposition: Decomposition) -> np.ndarray:
-    """(K, C) float64: each inside component summed over the target."""
+def _target_sums(decomposition: Decomposition) -> tuple[np.ndarray, np.ndarray | None]:
+    """:attr:`Decomposition.target_sums`, refusing anything but a decomposition."""
     if not isinstance(decomposition, Decomposition):
         raise InputError(f"decomposition must be an engine.decompose.Decomposition, got {type(decomposition).__name__}")
-    return decomposition.components[:, decomposition.target].astype(np.float64).sum(axis=1)
-
-
-def _inside_sum_covariance(decomposition: Decomposition) -> np.ndarray | None:
-    """(K, K, C) float64: the covariance of :func:`_inside_sums` (pixels independent), or None without one."""
-    packed = decomposition.covariance
-    if packed is None:
-        return None
-    k, c = decomposition.order, decomposition.components.shape[-1]
-    out = np.empty((k, k, c))
-    for i in range(k):
-        for j in range(i, k):
-            out[i, j] = out[j, i] = packed[packed_index(i, j, k)][decomposition.target].astype(np.float64).sum(axis=0)
-    return out
+    return decomposition.target_sums
 
 
 def _colour3(name: str, value) -> np.ndarray:

@@ -8,6 +8,7 @@ unreached light ``L̄_d`` and ``C R^i L_d`` (Eq. 4, 9).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -176,6 +177,29 @@ class Decomposition:
     def order(self) -> int:
         """K, the number of inside components."""
         return int(self.components.shape[0])
+
+    @cached_property
+    def target_sums(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The target's components ``R^i L_d`` summed over its pixels, and their covariance.
+
+        Returns
+        -------
+        sums : (K, C) float64
+        covariance : (K, K, C) float64 or None
+            Pixels taken as independent; None without :attr:`covariance`.
+
+        Computed once (the colour checks read them at every κ: a 12 MP target's planes are
+        gathered once, not per slider step).
+        """
+        sums = self.components[:, self.target].astype(np.float64).sum(axis=1)
+        if self.covariance is None:
+            return sums, None
+        k = self.order
+        cov = np.empty((k, k, sums.shape[1]))
+        for i in range(k):
+            for j in range(i, k):
+                cov[i, j] = cov[j, i] = self.covariance[packed_index(i, j, k)][self.target].astype(np.float64).sum(0)
+        return sums, cov
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -46,6 +46,8 @@ SPREAD = (0.2, 0.4)
 REACH = 3
 #: The 8 directions :func:`refine_mask` samples each side's colour along.
 DIRECTIONS = ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
+#: Steps along a direction read for a linear extrapolation, the nearest two first (:func:`_steps`).
+PAIRS = ((1, 2), (2, 3), (1, 3))
 #: How much worse (relative squared residual of the compositing equation) a pair of side colours may explain a
 #: pixel than the best pair and still count in :func:`refine_mask`'s coverage: ``e``-fold less per this much.
 RESIDUAL = 1e-3
@@ -256,11 +258,9 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
     if not near.any():
         return out if room is None else np.minimum(out, room)
     ys, xs = np.nonzero(near)
-    img = np.pad(photo, ((3, 3), (3, 3), (0, 0)), mode="edge")  # padded once, like the two sides: read per chunk
-    sides = np.pad(sure_in, 3), np.pad(sure_out, 3)
     for start in range(0, ys.size, CHUNK):  # the pairs' arrays are 64 per pixel: bounded memory
         y, x = ys[start:start + CHUNK], xs[start:start + CHUNK]
-        alpha, ok = _unmix(img, *sides, y, x, contrast)
+        alpha, ok = _unmix(photo, sure_in, sure_out, y, x, contrast)
         out[y[ok], x[ok]] = alpha[ok]
     out[out <= snap] = 0.0
     out[out >= 1.0 - snap] = 1.0
@@ -269,13 +269,12 @@ def refine_mask(mask, photograph, *, contrast: float = 0.05, snap: float = 0.1, 
 
 def _unmix(img: np.ndarray, sure_in: np.ndarray, sure_out: np.ndarray, ys: np.ndarray, xs: np.ndarray,
            contrast: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`refine_mask`'s coverage at pixels ``(ys, xs)``, and where it has one (``img``, ``sure_in`` and
-    ``sure_out`` padded by 3).
+    """:func:`refine_mask`'s coverage at pixels ``(ys, xs)`` of the photograph ``img``, and where it has one.
 
     Every pair of an inside and an outside colour (:func:`_side_colours`) whose colours differ by more than
     ``contrast`` gives its least-squares α; the pairs are weighted by how well they explain the pixel.
     """
-    pixel = img[ys + 3, xs + 3].astype(np.float64)
+    pixel = img[ys, xs].astype(np.float64)
     a, has_a = _side_colours(img, sure_in, ys, xs)
     b, has_b = _side_colours(img, sure_out, ys, xs)
     diff = a[:, None] - b[None]  # (8, 8, N, C)
@@ -291,10 +290,25 @@ def _unmix(img: np.ndarray, sure_in: np.ndarray, sure_out: np.ndarray, ys: np.nd
     return (weight * alpha).sum(axis=(0, 1)) / np.where(ok, weight.sum(axis=(0, 1)), 1.0), ok
 
 
+def _steps(region: np.ndarray, ys: np.ndarray, xs: np.ndarray, d: tuple[int, int]) -> dict:
+    """The pixels 1, 2 and 3 steps from ``(ys, xs)`` along ``d``: ``{i: (rows, columns, on region)}``.
+
+    Off the frame counts as off the region (rows and columns clipped into it).
+    """
+    h, w = region.shape
+    out = {}
+    for i in (1, 2, 3):
+        py, px = ys + i * d[0], xs + i * d[1]
+        inside = (py >= 0) & (py < h) & (px >= 0) & (px < w)
+        py, px = np.clip(py, 0, h - 1), np.clip(px, 0, w - 1)
+        out[i] = (py, px, inside & region[py, px])
+    return out
+
+
 def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One side's colour at pixels ``(ys, xs)`` along each of the 8 directions (:func:`refine_mask`).
 
-    ``img`` is the photograph padded by 3, ``sure`` the side's pixels not on the boundary, padded by 3 with False.
+    ``img`` is the photograph, ``sure`` the side's pixels not on the boundary.
     Along a direction ``d``: the linear extrapolation of the nearest two of ``p + d, p + 2d,
     p + 3d`` on the side; a pixel with no such pair along any direction (the frame's edge, a
     sliver one pixel wide) takes instead the nearest one along each direction.
@@ -306,12 +320,12 @@ def _side_colours(img: np.ndarray, sure: np.ndarray, ys: np.ndarray, xs: np.ndar
     """
     colours, found = np.zeros((8, ys.size, img.shape[-1])), np.zeros((8, ys.size), bool)
     along = []
-    for k, (dy, dx) in enumerate(DIRECTIONS):
-        at = {i: (ys + 3 + i * dy, xs + 3 + i * dx) for i in (1, 2, 3)}  # 1, 2 and 3 steps along d
-        on = {i: sure[q] for i, q in at.items()}
-        val = {i: img[q].astype(np.float64) for i, q in at.items()}
+    for k, d in enumerate(DIRECTIONS):
+        at = _steps(sure, ys, xs, d)
+        on = {i: q[2] for i, q in at.items()}
+        val = {i: img[q[0], q[1]].astype(np.float64) for i, q in at.items()}
         along.append((on, val))
-        for i, j in ((1, 2), (2, 3), (1, 3)):  # the nearest two along d
+        for i, j in PAIRS:
             take = on[i] & on[j] & ~found[k]
             colours[k, take] = val[i][take] + (val[i][take] - val[j][take]) * (i / (j - i))
             found[k] |= take
@@ -601,20 +615,15 @@ def _strip(components, inside, cov, ys, xs) -> tuple[np.ndarray, np.ndarray, np.
         How far the directions disagree: the standard deviation over ``d`` of the extrapolated
         light ``Σ_i c̃_i`` over its mean (RMS over channels); 0 where fewer than two directions have a pair.
     """
-    k, h, w, c = components.shape
+    k, _, _, c = components.shape
     alpha = cov[ys, xs].astype(np.float64)
     total = np.zeros((k, len(ys), c))
     square = np.zeros((len(ys), c))  # Σ_d (Σ_i c̃_i)², for the spread
     count = np.zeros(len(ys))
-    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (1, -1), (-1, 1), (-1, -1)):
-        at = {}  # the pixels 1, 2 and 3 steps along d: row, column, decomposed
-        for i in (1, 2, 3):
-            py, px = ys + i * dy, xs + i * dx
-            ok = (py >= 0) & (py < h) & (px >= 0) & (px < w)
-            py, px = np.clip(py, 0, h - 1), np.clip(px, 0, w - 1)
-            at[i] = (py, px, ok & inside[py, px])
+    for d in DIRECTIONS:
+        at = _steps(inside, ys, xs, d)
         done = np.zeros(len(ys), bool)
-        for i, j in ((1, 2), (2, 3), (1, 3)):  # the nearest two decomposed pixels along d
+        for i, j in PAIRS:
             ok = at[i][2] & at[j][2] & ~done
             if not ok.any():
                 continue

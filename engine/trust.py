@@ -563,14 +563,9 @@ def _weights(kappa: float, inside: bool, count: int) -> np.ndarray:
 
 def _target_sums(d: Decomposition) -> np.ndarray:
     """``Σ u_j`` over the target per channel and its standard deviation (pixels independent)."""
-    k, _, _, c = d.components.shape
-    out = np.zeros((2, k, c))
-    if d.target.any():
-        assert d.covariance is not None  # prepare_trust refuses decompositions without one
-        out[0] = d.components[:, d.target].astype(np.float64).sum(axis=1)  # on the target the unknowns are R^j L_d
-        out[1] = np.sqrt(np.maximum(np.stack([d.covariance[packed_index(j, j, k)][d.target].astype(np.float64)
-                                              .sum(axis=0) for j in range(k)]), 0))
-    return out
+    sums, cov = d.target_sums  # on the target the unknowns are R^j L_d
+    assert cov is not None  # prepare_trust refuses decompositions without one
+    return np.stack([sums, np.sqrt(np.maximum(np.einsum("jjc->jc", cov), 0))])
 
 
 def _tail_ratio(levels, ch: int, kappa: float) -> float:
