@@ -165,6 +165,8 @@ class Decomposition:
                 None if "observed" not in arrays else np.asarray(arrays["observed"]))
         check_float_image("components", d.components, ndim=4)
         check_float_image("unreached", d.unreached, ndim=3)
+        if d.observed is not None:
+            check_float_image("observed", d.observed, ndim=2)
         if d.covariance is not None:
             k = d.order
             check_float_image("covariance", d.covariance, ndim=4)

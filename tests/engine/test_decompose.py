@@ -140,6 +140,9 @@ def test_the_observations_summed_over_the_target_are_kept_where_they_still_hold(
     expected = noisy[:, target].astype(np.float64).sum(axis=1)
     np.testing.assert_allclose(d.observed, expected, rtol=1e-12)
     np.testing.assert_array_equal(Decomposition.from_arrays(d.to_arrays()).observed, d.observed)
+    corrupt = d.to_arrays() | {"observed": np.full_like(d.observed, np.nan)}
+    with pytest.raises(InputError, match="observed contains 12 non-finite values"):
+        Decomposition.from_arrays(corrupt)
     np.testing.assert_array_equal(denoise_components(d, noisy[0], radius=1).observed, d.observed)
     coverage = target.astype(np.float32)
     coverage[~target & np.roll(target, 1, axis=1)] = 0.5
