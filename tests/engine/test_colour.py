@@ -189,6 +189,25 @@ def test_kappa_limit_and_convergence_read_the_observations_not_the_clipped_compo
     assert convergence(noisy_last, kappa).converged
     assert convergence(noisy_last, kappa).share[2] == 0.0
 
+def test_a_last_term_larger_than_one_before_it_is_not_truncation():
+    """The realistic demo (64², 16 frames) warned "not converged at order 4: 7.9 % in B" from blue sums that read
+    −0.013 ± 0.002 then +0.0048 ± 0.0005: no convergent series of light has a negative term, nor a term larger
+    than one before it (the target returns to itself less light than it receives). A higher order cannot fix
+    such an error of the measurement, so it is not reported as truncation; a series that has not converged
+    still is."""
+    from dataclasses import replace
+
+    sums = np.array([1.0, 0.1, -0.013, 0.0048])
+    inconsistent = Decomposition(np.repeat(sums[:, None, None, None], 3, axis=-1).astype(np.float32),
+                                 np.zeros((1, 1, 3), np.float32), np.array([[True]]))
+    kappa = [1.0, 1.0, 8.0]
+    assert convergence(inconsistent, kappa).converged
+    assert convergence(_with_noise(inconsistent, 1e-3), kappa).converged
+    slow = replace(inconsistent, components=np.repeat(np.array([1.0, 0.5, 0.25, 0.125])[:, None, None, None], 3,
+                                                      axis=-1).astype(np.float32))
+    assert not convergence(slow, kappa).converged and not convergence(_with_noise(slow, 1e-3), kappa).converged
+
+
 def test_convergence_share_limit_and_advice():
     d = _geometric([0.05, 0.2, 0.5], 4)
     ok = convergence(d, [1.0, 1.0, 0.2])
