@@ -17,8 +17,9 @@ re-emitted and its edge pixels are recolored from both sides (``--edge``).
 
 The headline on stdout compares like with like: the relative error of our recolor (the
 noise-aware one the app shows and exports, :mod:`engine.trust`; stderr also gives the plain one's) and of a
-naive per-pixel recolor over the surfaces (the lamp in view dominates the image's norm and
-every method reproduces it). Noise reduction is sized from the measured components' noise
+naive per-pixel recolor over the surfaces (the lamp in view dominates the image's norm, and a
+recolor that keeps the lamp's light scores well over the whole image whatever it does to the
+surfaces). Noise reduction is sized from the measured components' noise
 (:func:`app.model.noise.denoise_radius`), so it never blurs noise-free data.
 """
 
@@ -202,7 +203,7 @@ def run(args) -> int:
         f"noise reduction (plain recolor): {denoised}\n"
         f"recolor: {'noise-aware' if doc.trusted is not None else 'plain'}; the plain recolor scores "
         f"{100 * err['plain'][0]:.2f} % on the surfaces\n"
-        f"over the whole image (the lamp in view dominates the norm and every method reproduces it): "
+        f"over the whole image (the lamp in view dominates the norm): "
         f"Albedit {100 * err['ours'][1]:.2f} %, naive {100 * err['naive'][1]:.2f} %\n"
         f"error.png: |ours - truth|, white = {scale:.3g} (99th percentile)\n"
         f"wrote {out}/recolored.exr, recolored.png, photograph.png, truth.png, error.png "
