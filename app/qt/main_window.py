@@ -139,6 +139,7 @@ class MainWindow(QMainWindow):
         self.readout.setStyleSheet("font-family: monospace;")
         self.note = QLabel(objectName="view_note")
         self.recolor_mode = QLabel(objectName="recolor_mode")
+        self.recolor_mode.setContentsMargins(12, 0, 0, 0)  # a long temporary message is clipped short of it
         self.zoom_label = QLabel(objectName="zoom")
         self.zoom_label.setMinimumWidth(self.zoom_label.fontMetrics().horizontalAdvance("  1600 %"))
         self.zoom_label.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
