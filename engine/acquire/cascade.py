@@ -250,7 +250,8 @@ class _Plan:
             image = recolor(self.prepared[t].decompose(stack), self.kappas[t])
             return _Measured(image, None)
         covariance = covariance_stack(noises, stack.shape[1:])
-        result = recolor_trusted(self.prepared[t].trust(stack, covariance), self.kappas[t])
+        # under a re-emission the brightest pixels are the projector's, not a lamp's
+        result = recolor_trusted(self.prepared[t].trust(stack, covariance, lamps=lighting is None), self.kappas[t])
         photo = stack[0].astype(np.float64)
         lit = np.abs(photo) > 1e-6 * max(float(np.abs(photo).max()), 1e-30)
         scale = np.divide(result.image, photo, out=np.zeros_like(photo), where=lit)

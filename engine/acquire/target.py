@@ -162,20 +162,21 @@ class PreparedTarget:
         return stand_in_weights(cov, self.mask)
 
     def trust(self, observations, covariance, *, unreached_light: bool = True, fill_radius: int = 3,
-              edge_radius: int = 1, should_stop=None) -> TrustedDecomposition:
+              edge_radius: int = 1, lamps: bool = True, should_stop=None) -> TrustedDecomposition:
         """The observations ready for noise-aware recoloring (:mod:`engine.trust`).
 
         Unconstrained weighted decompositions of every order up to the observations' (the
         first k observations are an order-k acquisition), unreachable pixels filled and, for a
         soft mask, edge pixels blended from both sides as in :meth:`decompose`, shares smoothed
-        by :func:`engine.trust.prepare_trust`.
+        by :func:`engine.trust.prepare_trust` (``lamps``: False when ``observations[0]`` is not
+        a photograph but the scene under a re-emission).
         """
         obs = np.asarray(observations)
         orders = (fill_unreachable(d, self.mask | self.unreachable, obs[0], radius=fill_radius)[0]
                   for d in each_order(obs, self.mask, covariance, unreached_light=unreached_light))
         if self.coverage is not None:
             orders = (blend_edges(d, self.coverage, obs[0], radius=edge_radius)[0] for d in orders)
-        return prepare_trust(orders, obs[0], should_stop=should_stop)  # one order in memory at a time
+        return prepare_trust(orders, obs[0], lamps=lamps, should_stop=should_stop)  # one order in memory at a time
 
     def report(self) -> str:
         """One line for logs and dialogs."""

@@ -81,7 +81,7 @@ _SETTINGS = Obj(required={
 _ADAPTIVE = Obj(required={
     "policy": Str(choices=("brute", "linear", "span")),
     "threshold": Num(0, 1, positive=True),
-})
+}, optional={"noise_band": Bool()})  # engine.acquire.Adaptive.to_dict (absent in plans saved before it)
 
 #: The acquisition plan (:func:`engine.workflow.capture_plan`).
 PLAN = Obj(required={

@@ -65,7 +65,8 @@ def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: l
         The captures carry no noise model (the camera's noise was not measured before they
         were taken): only the plain recolor is possible.
     SessionError
-        No acquisition in the session, or a capture needed is missing.
+        No acquisition in the session, a capture needed is missing, or an order-1 acquisition
+        (the photograph only: the plain recolor is κ times it, nothing to weigh).
     Cancelled
         Stopped on request.
 
@@ -93,6 +94,10 @@ def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: l
         raise NoNoiseModel(f"the acquisition in {session.path} carries no noise model (captured before the camera's "
                            "noise was measured): recolored plainly; recalibrate and capture again for the "
                            "noise-aware recolor")
+    if acq.observations.shape[0] < 2:  # prepare_trust would have no order to smooth, nor a target to recolor
+        raise SessionError(f"the acquisition in {session.path} is of order 1 (the photograph only): no interaction "
+                           "component to weigh against its noise; recolored plainly (κ times the photograph on the "
+                           "target)")
     checkpoint(should_stop, "preparing the noise-aware recolor")
     report(progress, 1, 2, "smoothing the interaction shares (once per acquisition)")
     trusted = result.targets[-1][1].trust(acq.observations, acq.covariance, should_stop=should_stop)
