@@ -606,16 +606,19 @@ def convergence(decomposition: Decomposition, kappa, *, threshold: float = CONVE
     demo, 64², 16 frames: blue sums −0.013 ± 0.002 then +0.0048 ± 0.0005 read "not converged,
     7.9 %", while the noise-aware recolor there, which puts the tail back from the decay ratio,
     is at 5.3 %). (The sums are of pixel radiance, not power: a strongly foreshortened target
-    bends that bound by its pixels' footprints.)
+    bends that bound by its pixels' footprints.) A channel with κ = 1 has nothing truncated:
+    the components sum to the photograph, which the recolor then returns.
 
     Examples
     --------
     >>> comps = np.zeros((2, 1, 2, 3), np.float32)
     >>> comps[0, 0, 0] = 1.0; comps[1, 0, 0] = 0.1
     >>> d = Decomposition(comps, np.zeros((1, 2, 3), np.float32), np.array([[True, False]]))
-    >>> c = convergence(d, 1.0)
+    >>> convergence(d, 1.0).converged
+    True
+    >>> c = convergence(d, 1.1)
     >>> round(float(c.share[0]), 4), c.converged
-    (0.0909, False)
+    (0.0991, False)
     >>> convergence(d, 0.1).converged
     True
     """
@@ -634,7 +637,8 @@ def convergence(decomposition: Decomposition, kappa, *, threshold: float = CONVE
     weights = kap[None, :] ** np.arange(1, k + 1)[:, None]
     total = (weights * sums).sum(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        share = np.where(total > 0, weights[-1] * last / np.where(total > 0, total, 1.0), 0.0)
+        # κ = 1 returns the photograph whatever the order: nothing is truncated in that channel
+        share = np.where((total > 0) & (kap != 1), weights[-1] * last / np.where(total > 0, total, 1.0), 0.0)
         ratio = kap / kappa_limit(decomposition)
     return Convergence(share, np.nan_to_num(ratio, nan=0.0), float(threshold), k)
 
