@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import runpy
 import sys
 from pathlib import Path
@@ -14,7 +15,7 @@ NAMES = ("solve", "recolor", "rig", "preview", "paper", "graycode", "denoise", "
 
 def add_arguments(parser) -> None:
     parser.add_argument("name", choices=NAMES, help="which benchmark")
-    parser.add_argument("rest", nargs="*", help="arguments passed to the benchmark")
+    parser.add_argument("rest", nargs=argparse.REMAINDER, help="the benchmark's own arguments (its --help lists them)")
 
 
 def run(args) -> int:

@@ -221,3 +221,11 @@ def test_the_demos_naive_recolor_starts_from_the_captured_photograph(tmp_path):
     assert result.returncode == 0, result.stderr
     ours, naive = _headline(result.stdout)
     assert naive > 0 and ours == naive
+
+
+def test_bench_passes_its_options_to_the_benchmark(capsys):
+    """`albedit bench solve --size 100 100` was refused ("unrecognized arguments") and `--help` showed bench's own."""
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "solve", "--help"])
+    assert exc.value.code == 0
+    assert "--size H W" in capsys.readouterr().out
