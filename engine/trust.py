@@ -115,6 +115,9 @@ class TrustedDecomposition:
         One per decomposition order, increasing.
     target : (H, W) bool
     unreached_light : bool
+    lamps : bool
+        Whether :func:`bright_pixels` of the photograph (a lamp, a highlight) were smoothed apart;
+        then they also choose their orders apart (:attr:`regions`).
     """
 
     photograph: np.ndarray
@@ -122,11 +125,20 @@ class TrustedDecomposition:
     levels: tuple
     target: np.ndarray
     unreached_light: bool = True
+    lamps: bool = False
 
     @property
     def order(self) -> int:
         """The highest order decomposed (1: the photograph only)."""
         return max((lv.order for lv in self.levels), default=1)
+
+    @cached_property
+    def regions(self) -> tuple:
+        """``(name, pixels, on the target)`` of each region :func:`recolor_trusted` chooses orders for (those with
+        pixels): ``"target"``, ``"elsewhere"`` and, with :attr:`lamps`, ``"bright"`` (:func:`bright_pixels`)."""
+        shine = bright_pixels(self.photograph, self.target) if self.lamps else np.zeros(self.target.shape, bool)
+        named = (("target", self.target, True), ("elsewhere", ~self.target & ~shine, False), ("bright", shine, False))
+        return tuple(r for r in named if r[1].any())
 
     @cached_property
     def gathered(self) -> dict:
@@ -140,9 +152,7 @@ class TrustedDecomposition:
         """
         out = {}
         unpacked = [_unpack_shares(lv.share_covariance, lv.order - 1) for lv in self.levels]
-        for name, region in (("target", self.target), ("elsewhere", ~self.target)):
-            if not region.any():
-                continue
+        for name, region, _ in self.regions:
             for ch in range(self.photograph.shape[2]):
                 photo = self.photograph[region, ch].astype(np.float64)
                 photo_var = self.photograph_variance[region, ch].astype(np.float64)
@@ -168,7 +178,7 @@ class TrustedDecomposition:
         (1, True, True)
         """
         arrays = {"photograph": self.photograph, "photograph_variance": self.photograph_variance,
-                  "target": self.target, "flags": np.array([self.unreached_light], bool),
+                  "target": self.target, "flags": np.array([self.unreached_light, self.lamps], bool),
                   "orders": np.array([lv.order for lv in self.levels], np.int64)}
         for lv in self.levels:
             arrays.update({f"shares{lv.order}": lv.shares, f"share_covariance{lv.order}": lv.share_covariance,
@@ -204,7 +214,8 @@ class TrustedDecomposition:
             if photo.ndim != 3 or variance.shape != photo.shape or target.shape != photo.shape[:2]:
                 raise InputError(f"photograph {photo.shape}, its variance {variance.shape} and target {target.shape} "
                                  "do not fit together")
-            return cls(photo, variance, tuple(levels), target, bool(np.asarray(arrays["flags"]).ravel()[0]))
+            flags = np.asarray(arrays["flags"], bool).ravel()
+            return cls(photo, variance, tuple(levels), target, bool(flags[0]), bool(flags[1:2].any()))
         except KeyError as exc:
             raise InputError(f"a noise-aware decomposition needs the array {exc.args[0]!r}") from None
 
@@ -221,7 +232,8 @@ class TrustedRecolor:
         Predicted standard deviation of its error: noise, smoothing bias and the truncation
         bias that remains.
     orders : dict
-        Per region (``"target"``, ``"elsewhere"``), per channel: ``(K, J)`` — the order of
+        Per region (``"target"``, ``"elsewhere"``, ``"bright"`` if any:
+        :attr:`TrustedDecomposition.regions`), per channel: ``(K, J)`` — the order of
         the decomposition used and how many of its components are measured, beyond which the
         tail is extrapolated (``J = K``: every order's candidate uses all its components);
         ``(1, 1)`` is the photograph times κ.
@@ -292,11 +304,12 @@ def prepare_trust(decompositions, photograph, *, radii=RADII, window: int = WIND
     window : int
         Half-size of the window SURE is averaged over to choose a radius.
     lamps : bool
-        Smooth the shares of non-target pixels far brighter than the rest apart
-        (:func:`bright_pixels`: a lamp, a highlight). False where ``photograph`` is not one: a
-        cascade's earlier target decomposed under the re-emission on a later one, whose brightest
-        pixels are that later target's, lit by the projector (smoothed apart there, Fig. 10 with
-        soft masks went from 1.52 % to 1.58 % over three seeds, up to 1.83 % on one).
+        Smooth the shares of non-target pixels far brighter than the rest apart, and choose their
+        orders apart (:func:`bright_pixels`: a lamp, a highlight). False where ``photograph`` is
+        not one: a cascade's earlier target decomposed under the re-emission on a later one, whose
+        brightest pixels are that later target's, lit by the projector (smoothed apart there, Fig.
+        10 with soft masks went from 1.52 % to 1.58 % over three seeds, up to 1.83 % on one; with
+        their orders apart too, 1.80 % on seed 1).
     progress, should_stop
         See :mod:`engine.progress`; checked per order, region and channel.
 
@@ -364,7 +377,7 @@ def prepare_trust(decompositions, photograph, *, radii=RADII, window: int = WIND
         return TrustedDecomposition(photo, np.zeros_like(photo), (), np.zeros(photo.shape[:2], bool))
     if total is not None:
         report(progress, total, total, "interaction shares smoothed")
-    return TrustedDecomposition(photo, photo_var, tuple(levels), first[0], first[1])
+    return TrustedDecomposition(photo, photo_var, tuple(levels), first[0], first[1], bool(lamps))
 
 
 def _check_decomposition(i: int, d) -> None:
@@ -437,9 +450,8 @@ def recolor_trusted(trusted: TrustedDecomposition, kappa) -> TrustedRecolor:
     sigma = np.zeros((h, w, c), np.float64)
     orders = {"target": [(1, 1)] * c, "elsewhere": [(1, 1)] * c}
     gathered = trusted.gathered
-    for name, region, inside in (("target", trusted.target, True), ("elsewhere", ~trusted.target, False)):
-        if not region.any():
-            continue
+    for name, region, inside in trusted.regions:
+        orders[name] = [(1, 1)] * c
         for ch in range(c):
             photo, photo_var, rel, per_level = gathered[(name, ch)]
             weights = _weights(kap[ch], inside, trusted.order)
@@ -572,11 +584,11 @@ def bright_pixels(photograph, target) -> np.ndarray:
     Cornell box, 64², 16 frames, κ = (2, 0.125, 8): the lamp's raw blue share 0.001 ± 0.014, its
     smoothed one 0.0074; the lamp 3.4 % off the truth where the photograph is 0.28 % off, and the
     whole image 3.41 % against the naive recolor's 2.46 %). Smoothed apart: the lamp 0.86 %, the
-    whole image 1.08 %, the surfaces 5.45 → 5.28 %. Its order is still chosen with the other
-    non-target pixels: choosing it apart too put the lamp at 0.54 %, but in a cascade, where an
-    earlier target is decomposed under the re-emission on a later one, that later target's
-    directly lit pixels are "bright" too, and choosing their order apart cost Fig. 10 with soft
-    masks 1.36 → 1.80 % (seed 1).
+    whole image 1.08 %, the surfaces 5.45 → 5.28 %; its orders chosen apart too (the chain of
+    orders for all non-target pixels is weighted so that a lamp does not decide, and at 4 frames
+    its noise times κ^i left it 7 % off): the lamp 0.54 % (at 48² with 4 frames 1.07 %, the photograph
+    1.08 %; the whole image 1.30 % against the naive recolor's 2.81 %). Not where the photograph is the scene
+    under a re-emission (:func:`prepare_trust`'s ``lamps``).
 
     Examples
     --------

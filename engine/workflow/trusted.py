@@ -19,7 +19,7 @@ from engine.workflow.decomposition import decomposition_key, discard_unusable, r
 __all__ = ["NoNoiseModel", "TRUST_VERSION", "load_trusted", "trusted_key"]
 
 #: Bump when the noise-aware preparation's maths or layout change: older cache entries are prepared again.
-TRUST_VERSION = 3
+TRUST_VERSION = 4
 
 
 class NoNoiseModel(SessionError):
@@ -32,7 +32,7 @@ def trusted_key(key: str) -> str:
     Examples
     --------
     >>> trusted_key("decomposition-0123456789abcdef")
-    'decomposition-0123456789abcdef-trusted3'
+    'decomposition-0123456789abcdef-trusted4'
     """
     return f"{key}-trusted{TRUST_VERSION}"
 
