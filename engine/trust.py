@@ -54,7 +54,7 @@ SIGNIFICANT = 3.0
 #: background would decide otherwise).
 DARK = 0.1
 #: Non-target pixels brighter than this many times the median non-target pixel (mean over channels) are a light
-#: source or a highlight in view (:func:`bright_pixels`): their shares are smoothed apart.
+#: source or a highlight in view (:func:`bright_pixels`): their shares are smoothed, and their orders chosen, apart.
 BRIGHT = 8.0
 #: A share's variance beyond this (σ a thousand times the pixel's own light) means "unknown".
 UNKNOWN = 1e6
