@@ -209,7 +209,10 @@ def run(args) -> int:
     write_image(out / "error.png", err_img)
     estimated = estimated_report(session)
     shots = max(sum(c.name.startswith("acq-") for c in session.captures), result.captures)  # as the bar counts
-    if args.denoise == "auto" and size == 0:
+    if args.denoise == "auto" and np.isnan(noise):
+        denoised = ("off: the components' noise cannot be measured (fewer than 16 target pixels inside its edge, or "
+                    "order 1)")
+    elif args.denoise == "auto" and size == 0:
         denoised = f"off: the components' noise is {100 * noise:.2g} % of their level, below {100 * SKIP_BELOW:.0f} %"
     elif args.denoise == "auto":
         denoised = (f"radius {size} (chosen from the components' noise, {100 * noise:.2g} % of their level); "

@@ -25,7 +25,7 @@ _OPERATOR = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 
 
 def component_noise(decomposition) -> float:
-    """Relative noise of the noisiest interreflection component on the target (0 for none).
+    """Relative noise of the noisiest interreflection component on the target (NaN when it cannot be measured).
 
     For each component ``R^i L_d`` with i ≥ 1, the noise σ is Immerkær's estimate
     ``sqrt(π/2) · mean|I * N| / 6`` over target pixels whose 3×3 neighbourhood is all target,
@@ -39,7 +39,8 @@ def component_noise(decomposition) -> float:
     -------
     float
         σ / level of the noisiest component (ideal virtual rig ≈ 0.006; realistic camera with 16
-        frames averaged ≈ 0.7 at 4th order).
+        frames averaged ≈ 0.7 at 4th order); NaN with fewer than 16 target pixels inside its edge
+        or no interreflection component (order 1), which it once reported as 0: "no noise".
 
     References
     ----------
@@ -47,7 +48,7 @@ def component_noise(decomposition) -> float:
     """
     inner = binary_erosion(np.asarray(decomposition.target, bool), np.ones((3, 3), bool))
     if inner.sum() < 16 or decomposition.components.shape[0] < 2:
-        return 0.0
+        return math.nan
     worst = 0.0
     for comp in decomposition.components[1:]:
         c = np.asarray(comp, np.float32).mean(axis=-1)
@@ -60,7 +61,7 @@ def component_noise(decomposition) -> float:
 
 
 def denoise_radius(decomposition) -> tuple[int, float]:
-    """The noise-reduction radius for ``decomposition`` (0: leave it as measured) and its noise.
+    """The noise-reduction radius for ``decomposition`` (0: leave it as measured) and its noise (NaN: unknown).
 
     Examples
     --------
@@ -74,8 +75,11 @@ def denoise_radius(decomposition) -> tuple[int, float]:
     >>> noisy = inside + np.random.default_rng(0).normal(0, 0.1, inside.shape).astype(np.float32)
     >>> denoise_radius(Decomposition.from_components(noisy, inside[:2] * 0, smooth, t))[0] > 0
     True
+    >>> radius, noise = denoise_radius(Decomposition.from_components(inside[:1], inside[:0], smooth, t))  # order 1
+    >>> radius, bool(np.isnan(noise))
+    (0, True)
     """
     noise = component_noise(decomposition)
-    if noise < SKIP_BELOW:
+    if math.isnan(noise) or noise < SKIP_BELOW:  # unknown noise: leave the decomposition as measured
         return 0, noise
     return int(min(max(math.ceil((noise / AIM - 1) / 2), 1), MAX_RADIUS)), noise

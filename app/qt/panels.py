@@ -467,8 +467,12 @@ class NoiseReductionPanel(QWidget):
             self._suggested, self._noise = denoise_radius(acq.raw)
             with QSignalBlocker(self.radius):
                 self.radius.setValue(acq.denoise or self._suggested)
-        suggestion = (f"Its noise is {100 * self._noise:.2g} % of the interreflections: "
-                      + (f"radius {self._suggested} px is suggested." if self._suggested else "no need to filter."))
+        if math.isnan(self._noise):
+            suggestion = ("Its noise cannot be measured (fewer than 16 target pixels inside its edge, or order 1): "
+                          "no radius is suggested.")
+        else:
+            suggestion = (f"Its noise is {100 * self._noise:.2g} % of the interreflections: "
+                          + (f"radius {self._suggested} px is suggested." if self._suggested else "no need to filter."))
         if acq.denoise:
             self.state.setText(f"Applied: radius {acq.denoise} px (saved with the edit; export uses it). {suggestion}")
         else:
