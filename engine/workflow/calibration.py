@@ -18,6 +18,11 @@ __all__ = [
 ]
 
 _CALIBRATION_GROUP = "rig"
+#: The session's arrays an acquisition needs to be replayed (its photograph's projector pattern): kept by a
+#: recalibration, as the colour group is.
+ACQUISITION_GROUP = "acquisition"
+#: The projector pattern the photograph was taken under (``capture --flood``), in :data:`ACQUISITION_GROUP`.
+PHOTOGRAPH_PATTERN = "photograph_pattern"
 
 
 def rig_metadata(rig, **extra) -> dict:
@@ -75,7 +80,7 @@ def open_session_for_rig(path, rig) -> Session:
 def save_calibration(session: Session, calibration: Calibration) -> None:
     """Store a calibration in a session (JSON + lossless arrays), keeping the session's colour facts."""
     meta, arrays = calibration.to_dict()
-    session.write_calibration(meta, {_CALIBRATION_GROUP: arrays}, keep=(COLOUR_GROUP,))
+    session.write_calibration(meta, {_CALIBRATION_GROUP: arrays}, keep=(COLOUR_GROUP, ACQUISITION_GROUP))
 
 
 def load_calibration(session: Session) -> Calibration:

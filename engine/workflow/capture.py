@@ -18,7 +18,7 @@ from engine.figurate import MAX_ORDER
 from engine.progress import Progress, ShouldStop
 from engine.session import Session
 from engine.session.edit import check_target_name, mask_digest, mask_name
-from engine.workflow.calibration import check_rig, load_calibration
+from engine.workflow.calibration import ACQUISITION_GROUP, PHOTOGRAPH_PATTERN, check_rig, load_calibration
 from engine.workflow.colour import store_directs
 from engine.workflow.decomposition import decomposition_key
 
@@ -308,6 +308,8 @@ def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, ad
     targets, plan = checked.targets, checked.plan
     for (name, mask), digest in zip(targets, plan["masks"], strict=True):
         session.write_mask(mask_name(name, digest), mask)
+    if photograph_pattern is not None:  # the replay needs it to find (and check) the photograph
+        session.write_array(ACQUISITION_GROUP, PHOTOGRAPH_PATTERN, np.asarray(photograph_pattern, np.float32))
     session.update(plan=plan, status="capturing")
     recorder = Recorder(rig, session, progress=progress, should_stop=should_stop, on_capture=on_capture, frames=frames)
     result = acquire_cascade(recorder, checked.calibration, targets, order, fixed_kappa=fixed_kappa,

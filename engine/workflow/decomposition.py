@@ -20,7 +20,7 @@ from engine.progress import Progress, ShouldStop
 from engine.rig import Camera, Frame, Projector
 from engine.session import Session
 from engine.session.edit import Edit, mask_name
-from engine.workflow.calibration import load_calibration
+from engine.workflow.calibration import ACQUISITION_GROUP, PHOTOGRAPH_PATTERN, load_calibration
 
 __all__ = [
     "DECOMPOSITION_VERSION", "cached_decomposition", "decomposition_key", "denoised_key", "load_decomposition",
@@ -233,9 +233,13 @@ def reacquired(session: Session, rig=None, *, should_stop=None) -> CascadeResult
         targets.append((name, session.read_mask(stored if stored in masks else name)))  # older sessions: by name
     settings = CaptureSettings.from_dict(plan["settings"])
     adaptive = None if plan["adaptive"] is None else Adaptive(**plan["adaptive"])
+    # a photograph under a projector pattern (capture --flood) is found by that pattern; sessions captured before
+    # it was stored cannot be replayed (SessionError: the captures say which pattern they were taken with)
+    pattern = session.read_array(ACQUISITION_GROUP, PHOTOGRAPH_PATTERN) if plan["photograph_pattern"] else None
     recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session, should_stop=should_stop)
     return acquire_cascade(recorder, load_calibration(session), targets, plan["order"],
-                           fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive)
+                           fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive,
+                           photograph_pattern=pattern)
 
 
 def photograph_name(session: Session, edit: Edit | None = None) -> str:

@@ -229,3 +229,15 @@ def test_bench_passes_its_options_to_the_benchmark(capsys):
         main(["bench", "solve", "--help"])
     assert exc.value.code == 0
     assert "--size H W" in capsys.readouterr().out
+
+
+def test_a_session_captured_under_a_flood_replays_for_the_noise_aware_recolor(tmp_path):
+    """`capture --flood` sessions fell back to the plain recolor ("'acq-photograph' was taken with a different projector
+    pattern"): the replay did not know the photograph's pattern, which the session now keeps."""
+    session = str(tmp_path / "f")
+    assert _run("calibrate", session, "--rig", "virtual:cornell", "--resolution", "24").returncode == 0
+    captured = _run("capture", session, "--target", "right_wall", "--order", "2", "--flood", "0.5")
+    assert captured.returncode == 0, captured.stderr
+    result = _run("recolor", session, "--target", "right_wall", "--kappa", "2,0.125,8", "-o", str(tmp_path / "x.exr"))
+    assert result.returncode == 0, result.stderr
+    assert "noise-aware recolor" in result.stderr and "different projector pattern" not in result.stderr, result.stderr
