@@ -44,7 +44,7 @@ __all__ = [
 #: Colour of each Gray-code pixel status on the coverage map, and its legend text.
 STATUS_COLOURS: dict[PixelStatus, tuple[str, str]] = {
     PixelStatus.DECODED: ("#3fae5a", "decoded"),
-    PixelStatus.UNLIT: ("#3b4a8f", "unlit (projector shadow)"),
+    PixelStatus.UNLIT: ("#3b4a8f", "unlit (projector shadow or no surface)"),
     PixelStatus.LOW_CONTRAST: ("#f0a030", "low contrast"),
     PixelStatus.OUT_OF_RANGE: ("#d0306a", "outside the projector"),
 }

@@ -318,7 +318,7 @@ class Correspondence:
         if bad == 0:
             return f"all {total} {where} decoded"
         parts = [
-            f"{c['unlit']} unlit (projector shadow)" if c["unlit"] else "",
+            f"{c['unlit']} unlit (projector shadow or no surface)" if c["unlit"] else "",
             f"{c['low_contrast']} low contrast" if c["low_contrast"] else "",
             f"{c['out_of_range']} outside the projector's range" if c["out_of_range"] else "",
         ]

@@ -174,8 +174,9 @@ def calibration_problems(calibration: Calibration) -> list[tuple[str, str]]:
         fixes = ["targets can only be edited where the projector reaches: keep them on the green "
                  "pixels of the coverage map"]
         if counts["unlit"]:
-            fixes.append("unlit pixels are in the projector's shadow: targets there cannot be edited; "
-                         "place the projector closer to the camera's viewpoint")
+            fixes.append("unlit pixels are in the projector's shadow or see no surface (the void, a far "
+                         "background): targets there cannot be edited; for shadows, place the projector closer to "
+                         "the camera's viewpoint")
         if counts["low_contrast"]:
             fixes.append("low contrast: focus the projector, lengthen the exposure, darken the room")
         if counts["out_of_range"]:
