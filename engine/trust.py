@@ -136,7 +136,7 @@ class TrustedDecomposition:
     def regions(self) -> tuple:
         """``(name, pixels, on the target)`` of each region :func:`recolor_trusted` chooses orders for (those with
         pixels): ``"target"``, ``"elsewhere"`` and, with :attr:`lamps`, ``"bright"`` (:func:`bright_pixels`)."""
-        shine = bright_pixels(self.photograph, self.target) if self.lamps else np.zeros(self.target.shape, bool)
+        shine = _apart(self.photograph, self.target, self.lamps)
         named = (("target", self.target, True), ("elsewhere", ~self.target & ~shine, False), ("bright", shine, False))
         return tuple(r for r in named if r[1].any())
 
@@ -367,7 +367,7 @@ def prepare_trust(decompositions, photograph, *, radii=RADII, window: int = WIND
             report(progress, i, total, f"smoothing the interaction shares of order {d.order}")
         if not levels:
             # every decomposition has the first one's target
-            shine = bright_pixels(photo, d.target) if lamps else np.zeros(photo.shape[:2], bool)
+            shine = _apart(photo, d.target, lamps)
         levels.append(_level(d, shine, radii, int(window), should_stop))
         if len(levels) == 1:
             assert d.covariance is not None  # _check_decomposition
@@ -601,6 +601,11 @@ def bright_pixels(photograph, target) -> np.ndarray:
     if not lit.any():
         return lit
     return lit & (level > BRIGHT * float(np.median(level[lit])))
+
+
+def _apart(photograph: np.ndarray, target: np.ndarray, lamps: bool) -> np.ndarray:
+    """(H, W) bool: the pixels smoothed and chosen for apart — :func:`bright_pixels` with ``lamps``, else none."""
+    return bright_pixels(photograph, target) if lamps else np.zeros(np.shape(target), bool)
 
 
 def _unknowns(d: Decomposition, ch: int) -> np.ndarray:

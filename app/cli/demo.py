@@ -40,16 +40,15 @@ from app.model.noise import SKIP_BELOW, denoise_radius
 from engine.acquire import Adaptive
 from engine.acquire.predict import relative_error
 from engine.colour import convergence
-from engine.errors import InputError
+from engine.errors import InputError, SessionError
 from engine.imageio import to_display, write_image
 from engine.recolor import recolor
-from engine.rig import fingerprint_differences, fingerprint_of
 from engine.session import Session
 from engine.workflow import (
     edit_from_plan,
     estimated_report,
     noise_reduced,
-    rig_metadata,
+    open_session_for_rig,
     run_calibration,
     run_capture,
     save_edit,
@@ -110,18 +109,22 @@ def error_image(ours: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, float]
     return cv2.applyColorMap(grey, cv2.COLORMAP_INFERNO)[..., ::-1].copy(), scale
 
 
-def _check_same_setup(session: Session, rig) -> None:
-    """Refuse to reuse a demo session made with another set-up (projector pose, camera model, resolution, scene).
+def _demo_session(path: Path, rig) -> Session:
+    """The demo's session at ``path`` for ``rig``: created, or reused only if made with the same set-up.
 
-    Its captures would be scored against this set-up's truth: the co-axial captures reused for
-    ``--projector offset`` scored 0.14 % where a fresh offset run scores 1.40 %.
+    A session of another set-up (projector pose, camera model, resolution, scene) would have its
+    captures scored against this set-up's truth: the co-axial captures reused for ``--projector
+    offset`` scored 0.14 % where a fresh offset run scores 1.40 %. A demo session too old to
+    record its set-up is refused as well (demo sessions are cheap to make again).
     """
-    recorded = session.fingerprint
-    differences = (["it does not record its set-up (made by an older version)"] if recorded is None
-                   else fingerprint_differences(recorded, fingerprint_of(rig)))
-    if differences:
-        raise InputError(f"{session.path} holds a demo session of another set-up ({'; '.join(differences)}): "
-                         "add --fresh to replace it, or choose another --output")
+    try:
+        session = open_session_for_rig(path, rig, demo=True)
+    except SessionError as exc:
+        raise InputError(f"{exc}, or add --fresh to replace it") from None
+    if session.fingerprint is None:
+        raise InputError(f"{path} holds a demo session too old to record its set-up: add --fresh to replace it, "
+                         "or choose another --output")
+    return session
 
 
 def run(args) -> int:
@@ -155,16 +158,7 @@ def run(args) -> int:
         mask = rig.targets[target]
         if args.kappa is None:
             args.kappa = demo_kappa(rig, mask)
-        if (session_path / "manifest.json").exists():
-            session = Session.open(session_path)
-            _check_same_setup(session, rig)
-            session.recover_orphans()
-        else:
-            session = Session.create(
-                session_path, rig_name=rig.identity, camera_resolution=tuple(rig.camera.resolution),
-                projector_resolution=tuple(rig.projector.resolution), metadata=rig_metadata(rig, demo=True),
-                fingerprint=fingerprint_of(rig),
-            )
+        session = _demo_session(session_path, rig)
         kind = ("ideal" if args.ideal else "realistic") + (" path-traced" if path_traced else "")
         print(f"calibrating {rig.name} ({kind}, {args.projector}) ...", file=sys.stderr)
         run_calibration(rig, session, progress=ProgressBar())

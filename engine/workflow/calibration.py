@@ -42,8 +42,10 @@ def rig_metadata(rig, **extra) -> dict:
     return {"projector_bit_depth": int(getattr(rig.projector, "bit_depth", 8)), **extra}
 
 
-def open_session_for_rig(path, rig) -> Session:
+def open_session_for_rig(path, rig, **metadata) -> Session:
     """Open the session at ``path`` (adopting orphan captures) or create one for ``rig``.
+
+    ``metadata``: extra facts a new session records beside :func:`rig_metadata`'s (e.g. ``demo=True``).
 
     Raises
     ------
@@ -72,7 +74,7 @@ def open_session_for_rig(path, rig) -> Session:
         rig_name=rig.identity,
         camera_resolution=tuple(rig.camera.resolution),
         projector_resolution=tuple(rig.projector.resolution),
-        metadata=rig_metadata(rig),
+        metadata=rig_metadata(rig, **metadata),
         fingerprint=fingerprint_of(rig),
     )
 

@@ -87,6 +87,11 @@ def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: l
         except InputError as exc:
             discard_unusable(session, name, f"the cached noise-aware data {name!r} was unusable ({exc}); prepared "
                              "it again", notes)
+    if (session.state.get("plan") or {}).get("order") == 1:  # known before the replay ("auto" captures 2 or more)
+        # prepare_trust would have no order to smooth, nor a target to recolor
+        raise SessionError(f"the acquisition in {session.path} is of order 1 (the photograph only): no interaction "
+                           "component to weigh against its noise; recolored plainly (κ times the photograph on the "
+                           "target)")
     report(progress, 0, 2, "reading the acquisition's captures")
     result = reacquired(session, rig, should_stop=should_stop)
     acq = result.acquisition
@@ -94,10 +99,6 @@ def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: l
         raise NoNoiseModel(f"the acquisition in {session.path} carries no noise model (captured before the camera's "
                            "noise was measured): recolored plainly; recalibrate and capture again for the "
                            "noise-aware recolor")
-    if acq.observations.shape[0] < 2:  # prepare_trust would have no order to smooth, nor a target to recolor
-        raise SessionError(f"the acquisition in {session.path} is of order 1 (the photograph only): no interaction "
-                           "component to weigh against its noise; recolored plainly (κ times the photograph on the "
-                           "target)")
     checkpoint(should_stop, "preparing the noise-aware recolor")
     report(progress, 1, 2, "smoothing the interaction shares (once per acquisition)")
     trusted = result.targets[-1][1].trust(acq.observations, acq.covariance, should_stop=should_stop)
