@@ -561,14 +561,22 @@ class Convergence:
         return bool(np.all(self.share <= self.threshold) and np.all(self.ratio < 1))
 
     def message(self) -> str:
-        """One line for a status bar or stderr: empty when converged, else what is wrong and what helps."""
+        """One line for a status bar or stderr: empty when converged, else what is wrong and what helps.
+
+        Examples
+        --------
+        >>> c = Convergence(share=np.zeros(3), ratio=np.array([0.5, 3.0, 1.6e29]), threshold=0.05, order=4)
+        >>> c.message().split("(")[1]  # a limit near 0 gives an absurd ratio: capped
+        'κ is over 100× the limit); ask for a smaller change'
+        """
         if self.converged:
             return ""
         c = int(np.argmax(self.ratio)) if np.any(self.ratio >= 1) else int(np.argmax(self.share))
         channel = "RGB"[c]
         if self.ratio[c] >= 1:
+            times = f"{self.ratio[c]:.2f}×" if self.ratio[c] < 100 else "over 100×"  # the limit can be near 0
             return (f"κ diverges in {channel}: the target would reflect more light than it receives round its "
-                    f"interreflections (κ is {self.ratio[c]:.2f}× the limit); ask for a smaller change")
+                    f"interreflections (κ is {times} the limit); ask for a smaller change")
         return (f"the recolor has not converged at order {self.order}: the last interaction is "
                 f"{self.share[c]:.1%} of the target's light in {channel} (above {self.threshold:.0%}); "
                 "capture a higher order or ask for a smaller change")

@@ -69,6 +69,17 @@ def fraction(text: str) -> float:
     return value
 
 
+def level(text: str) -> float:
+    """A projector level in [0, 1] (1 is full white)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 <= value <= 1:
+        raise argparse.ArgumentTypeError(f"a projector level must be in 0..1 (1 is full white), got {text!r}")
+    return value
+
+
 def resolution(text: str) -> tuple[int, int]:
     """Parse ``"256"`` or ``"240x320"`` (H x W)."""
     try:

@@ -29,8 +29,10 @@ def run(args) -> int:
         report_session(session, "calibrate")
         cal = run_calibration(rig, session, levels=args.levels, crosstalk=args.crosstalk, progress=ProgressBar())
     print(f"calibrated {rig.name} into {args.session}", file=sys.stderr)
-    print(cal.metadata.get("coverage", ""), file=sys.stderr)
-    print(cal.metadata.get("exposure", ""), file=sys.stderr)
-    for what, fix in calibration_problems(cal):
+    problems = calibration_problems(cal)
+    for report in (cal.metadata.get("coverage", ""), cal.metadata.get("exposure", "")):
+        if report and not any(report in what for what, _ in problems):  # a problem says it once, with its fix
+            print(report, file=sys.stderr)
+    for what, fix in problems:
         print(f"problem: {what}\n  fix: {fix}", file=sys.stderr)
     return 0

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.cli._args import add_rig_options, fraction, frames, kappa, open_rig, order, report_session
+from app.cli._args import add_rig_options, fraction, frames, kappa, level, open_rig, order, report_session
 from app.cli.main import ProgressBar
 from engine.acquire import Adaptive, CaptureSettings
 from engine.errors import InputError
@@ -47,7 +47,7 @@ def add_arguments(parser) -> None:
                         help="adaptive relative-error threshold in (0, 1] (default 0.01, 1%%)")
     parser.add_argument("--frames", type=frames, default=1, help="frames averaged per capture (default %(default)s)")
     parser.add_argument("--rgb", action="store_true", help="emit all channels at once instead of one primary at a time")
-    parser.add_argument("--flood", type=float, default=None, metavar="LEVEL",
+    parser.add_argument("--flood", type=level, default=None, metavar="LEVEL",
                         help="light the photograph with a projector flood of this level instead of black")
 
 
@@ -99,8 +99,8 @@ def run(args) -> int:
             progress=ProgressBar(),
         )
     print(
-        f"captured {result.images} images ({result.predicted} predicted, {result.captures} camera shots) "
-        f"for {', '.join(n for n, _ in targets)} at order {len(result.acquisition.observations)}",
+        f"captured {', '.join(n for n, _ in targets)} at order {len(result.acquisition.observations)}: "
+        f"{result.report(result.shots)}",
         file=sys.stderr,
     )
     for name, prepared in result.targets:

@@ -13,7 +13,10 @@ per capture).
 Where the rig's pixels mix surfaces (the realistic rig's supersampled pixels, the path tracer's),
 the target is painted as an artist would: the scene's mask with its edge refined from a
 photograph (:func:`app.model.demo.refined_target`), so only pixels wholly on the wall are
-re-emitted and its edge pixels are recolored from both sides (``--edge``).
+re-emitted and its edge pixels are recolored from both sides (``--edge``). The photograph is
+taken in the scene's natural light: a scene lit by the projector (the wedge, the floor: the
+scene's ``lighting``) is photographed under that flood, as ``albedit capture --flood`` does,
+and its truth is rendered under the same flood.
 
 The headline on stdout compares like with like: the relative error of our recolor (the
 noise-aware one the app shows and exports, :mod:`engine.trust`; stderr also gives the plain one's) and of a
@@ -166,15 +169,23 @@ def run(args) -> int:
               f"with κ = ({', '.join(f'{k:g}' for k in args.kappa)}) ...", file=sys.stderr)
         refine = args.edge == "refine" or (args.edge == "auto" and (path_traced or not args.ideal))
         painted = refined_target(rig, session, mask, frames=frames) if refine else mask
+        # the photograph is taken in the scene's natural light: its lamps, or a projector flood (Figs. 3, 8, 11)
+        rig.ambient, level = rig.lighting["ambient"], rig.lighting["projector_flood"]
+        flood = np.full((*rig.projector.resolution, 3), level, np.float32) if level > 0 else None
+        if flood is not None:
+            print(f"the scene is lit by the projector: the photograph is taken under a flood of {level:g}",
+                  file=sys.stderr)
         result = run_capture(
             rig, session, [(target, painted)], args.order,
             adaptive=None if args.adaptive == "brute" else Adaptive(args.adaptive),
+            photograph_pattern=flood,
             frames=frames,
             progress=ProgressBar(),
         )
-        truth = rig.truth.recolor([(mask, args.kappa)])
+        truth = rig.truth.recolor([(mask, args.kappa)], ambient=rig.ambient, pattern=flood)
         photo = result.acquisition.observations[0]  # as captured: the naive recolor starts from what we start from
         surfaces = ~rig.truth.emitters()  # the lamp dwarfs every surface: score without it
+        lamp = not surfaces.all()
     d = result.decomposition
     raw = recolor(d, args.kappa)
     unconverged = convergence(d, args.kappa).message()  # as `albedit recolor` and the app warn
@@ -202,7 +213,6 @@ def run(args) -> int:
     err_img, scale = error_image(ours, truth)
     write_image(out / "error.png", err_img)
     estimated = estimated_report(session)
-    shots = max(sum(c.name.startswith("acq-") for c in session.captures), result.captures)  # as the bar counts
     if args.denoise == "auto" and np.isnan(noise):
         denoised = ("off: the components' noise cannot be measured (fewer than 16 target pixels inside its edge, or "
                     "order 1)")
@@ -215,12 +225,11 @@ def run(args) -> int:
         denoised = f"radius {size} (asked for)" if size else "off (asked for)"
     print(
         f"{result.targets[0][1].report()}\n" + (f"{estimated}\n" if estimated else "") +
-        f"images: {result.images} observation images ({result.predicted} predicted) in {shots} camera shots: "
-        f"{result.captures} for the observations, {shots - result.captures} for the direct image D\n"
+        f"images: {result.report(result.shots)}\n"
         f"noise reduction (plain recolor): {denoised}\n"
         f"recolor: {'noise-aware' if doc.trusted is not None else 'plain'}; the plain recolor scores "
         f"{100 * err['plain'][0]:.2f} % on the surfaces\n"
-        f"over the whole image (the lamp in view dominates the norm): "
+        f"over the whole image{' (the lamp in view dominates the norm)' if lamp else ''}: "
         f"Albedit {100 * err['ours'][1]:.2f} %, naive {100 * err['naive'][1]:.2f} %\n"
         f"error.png: |ours - truth|, white = {scale:.3g} (99th percentile)\n"
         f"wrote {out}/recolored.exr, recolored.png, photograph.png, truth.png, error.png "
@@ -231,6 +240,6 @@ def run(args) -> int:
     if err["ours"][0] > err["naive"][0] and gain > 100 and not args.ideal:
         print(f"hint: κ^K = {gain:.0f} multiplies the camera noise of the last interaction component; average more "
               f"frames (--frames), denoise more (--denoise) or lower the order (--order 2)", file=sys.stderr)
-    print(f"relative error vs ground truth on the surfaces ({kind} rig, the lamp left out): "
+    print(f"relative error vs ground truth on the surfaces ({kind} rig{', the lamp left out' if lamp else ''}): "
           f"Albedit {100 * err['ours'][0]:.2f} %, naive per-pixel recolor {100 * err['naive'][0]:.2f} %")
     return 0

@@ -11,9 +11,10 @@ from app.cli.recolor import (
     add_recolor_option,
     choose_recolor,
     open_edit,
+    output_dtype,
     set_noise_reduction,
-    write,
 )
+from app.model.files import export_image
 from engine.errors import SessionError
 
 
@@ -26,12 +27,13 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
+    dtype = output_dtype(args.output, args.half)
     doc, session = open_edit(args.session, "export")
     state = session.state
     if "edit" not in state and "edits" not in state:
         raise SessionError(f"session {args.session} has no saved edit: use `albedit recolor` or save from the app")
     set_noise_reduction(doc, session, args.denoise)
     choose_recolor(doc, session, args.noise_aware, "export")
-    write(doc, args.output, half=args.half)
+    export_image(doc, args.output, dtype=dtype)
     print(f"wrote {args.output}", file=sys.stderr)
     return 0

@@ -7,10 +7,12 @@ report progress on stderr, print one-line errors and exit non-zero on failure.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from collections.abc import Callable
 
+from app.model.progress import TimeLeft, format_duration
 from engine.errors import AlbeditError
 
 #: subcommand name -> (module, one-line help); modules expose add_arguments(parser) and run(args)
@@ -27,7 +29,12 @@ COMMANDS = {
 
 
 class ProgressBar:
-    """A one-line progress bar on stderr, usable as an engine ``progress`` callback."""
+    """A progress report on stderr, usable as an engine ``progress`` callback.
+
+    On a terminal it is one line redrawn in place; written to a file or a pipe (a log) it is a
+    line per tenth of the work, so a log reads as a short list, not as thousands of carriage
+    returns.
+    """
 
     #: a bar's line is on the terminal without its newline (an error must start a line of its own)
     unfinished = False
@@ -37,12 +44,19 @@ class ProgressBar:
         self.width = width
         self.start = time.monotonic()
         self._last = ""
+        self.time_left = TimeLeft()  # the app's rule: a resumed run's instant first steps do not count
+        self._logged: int | None = None
+        isatty = getattr(self.stream, "isatty", None)
+        self.terminal = bool(isatty and isatty())
 
     def __call__(self, step: int, total: int, message: str) -> None:
         frac = 0.0 if total <= 0 else min(1.0, step / total)
+        if not self.terminal:
+            self._log(step, total, frac, message)
+            return
         filled = int(round(frac * self.width))
-        elapsed = time.monotonic() - self.start
-        eta = f" ~{elapsed / frac - elapsed:4.0f}s left" if 0 < frac < 1 else ""
+        left = self.time_left.update(step, total)
+        eta = f" ~{format_duration(left)} left" if left is not None and 0 < frac < 1 else ""
         line = f"\r[{'#' * filled}{'.' * (self.width - filled)}] {step}/{total} {message[:48]:<48}{eta}"
         if line != self._last:
             self.stream.write(line)
@@ -54,6 +68,14 @@ class ProgressBar:
             self._last = ""
             ProgressBar.unfinished = False
 
+    def _log(self, step: int, total: int, frac: float, message: str) -> None:
+        tenth = int(frac * 10)
+        if tenth == self._logged:
+            return
+        self._logged = tenth
+        self.stream.write(f"[{step}/{total}] {message} ({time.monotonic() - self.start:.0f} s)\n")
+        self.stream.flush()
+
 
 def _end_progress_line() -> None:
     if ProgressBar.unfinished:
@@ -61,10 +83,37 @@ def _end_progress_line() -> None:
         ProgressBar.unfinished = False
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line: what is wrong, and where to read more."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+
+#: a value that argparse would take for an option because it starts with '-' (it only knows plain numbers)
+_NEGATIVE_VALUE = re.compile(r"-\.?[0-9]")
+
+
+def _attach_negative_values(argv: list[str]) -> list[str]:
+    """Write ``--kappa -1,1,1`` as ``--kappa=-1,1,1`` so that the value reaches its option's check."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        token = argv[i]
+        if token.startswith("--") and token != "--" and "=" not in token and i + 1 < len(argv) \
+                and _NEGATIVE_VALUE.match(argv[i + 1]):
+            out.append(f"{token}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(token)
+            i += 1
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     import importlib
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="albedit",
         description="Measurement-based editing of diffuse albedo with consistent interreflections.",
         epilog="Without a subcommand, opens the desktop app (on the virtual rig demo, or on SESSION).",
@@ -79,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def run_command(argv: list[str] | None = None) -> int:
     """Parse ``argv`` (a subcommand and its options), run it, and return the exit status."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _attach_negative_values(list(sys.argv[1:] if argv is None else argv))
     args = build_parser().parse_args(argv)
     if args.command is None:
         build_parser().print_help()

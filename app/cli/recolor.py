@@ -118,11 +118,18 @@ def set_noise_reduction(doc: Document, session: Session, denoise: int | None) ->
     doc.set_noise_reduction(denoise, filtered)
 
 
-def write(doc: Document, path: Path, *, half: bool) -> None:
-    """Export the document's recolored image (float EXR or TIFF, half EXR, or 8-bit sRGB PNG) with its edit."""
+def output_dtype(path: Path, half: bool) -> str:
+    """The sample type written to ``path``: float EXR or TIFF, half EXR (``--half``), 8-bit sRGB PNG.
+
+    Raises
+    ------
+    InputError
+        ``--half`` for a file that is not an EXR (checked before any work).
+    """
     suffix = path.suffix.lower()
-    dtype = "half" if (half and suffix == ".exr") else ("uint8" if suffix == ".png" else "float")
-    export_image(doc, path, dtype=dtype)
+    if half and suffix != ".exr":
+        raise InputError(f"--half writes half floats, which only EXR holds; {path.name!r} is not an .exr")
+    return "half" if half else ("uint8" if suffix == ".png" else "float")
 
 
 def requested_kappa(args, doc: Document, session: Session) -> tuple[np.ndarray, TargetColour | None]:
@@ -181,6 +188,7 @@ def describe(name: str, kappa: np.ndarray, colour: TargetColour | None, exposure
 
 
 def run(args) -> int:
+    dtype = output_dtype(args.output, args.half)
     doc, session = open_edit(args.session, "recolor")
     free = doc.target(doc.acquisition.cascade[-1])
     if args.target is not None and args.target != free.name:
@@ -196,7 +204,7 @@ def run(args) -> int:
     doc.set_kappa(free.uid, new)
     set_noise_reduction(doc, session, args.denoise)
     choose_recolor(doc, session, args.noise_aware, "recolor")
-    write(doc, args.output, half=args.half)
+    export_image(doc, args.output, dtype=dtype)
     print(f"wrote {args.output}", file=sys.stderr)
     d = doc.acquisition.decomposition
     if doc.trusted is not None:  # the noise-aware recolor's own prediction: noise and the bias it leaves

@@ -220,7 +220,8 @@ def document_edit(document: Document, *, photograph: str | None = None) -> Edit:
                       for t in document.targets),
         acquisition=None if acq is None else EditAcquisition(
             tuple(document.target(u).name for u in acq.cascade),
-            tuple(tuple(float(k) for k in kap) for kap in acq.kappas),
+            # the earlier targets' κ at acquisition (they shaped the emitted light); the free one's as edited
+            tuple(tuple(float(k) for k in kap) for kap in (*acq.kappas[:-1], document.target(acq.cascade[-1]).kappa)),
             acq.key, int(acq.denoise), bool(acq.noise_aware)),
         current=document.target(document.current).name if document.current != -1 else None,
         photograph=photograph,

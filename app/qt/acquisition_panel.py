@@ -31,10 +31,11 @@ from PySide6.QtWidgets import (
 
 from app.qt.rig_views import ThumbnailStrip
 from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
-from engine.acquire import Adaptive, CaptureSettings
+from engine.acquire import CAPTURE_PREFIX, Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
 from engine.workflow import Unreachable, check_rig, estimated_report, load_calibration, preflight, run_capture
+from engine.workflow.calibration import ACQUISITION_GROUP, PHOTOGRAPH_PATTERN
 
 __all__ = ["AcquisitionPanel", "POLICIES", "unreachable_target_pixels"]
 
@@ -137,7 +138,6 @@ class AcquisitionPanel(QWidget):
         #: ``branch(reason) -> Session or None``: asked when the session holds another plan; a new
         #: session to acquire into (the owner asks the user), or None to stay refused.
         self.branch = None
-        self._shots = 0
         self._left_out: list[str] = []
         self.result = None
 
@@ -154,6 +154,12 @@ class AcquisitionPanel(QWidget):
             self.emission.addItem(label)
         self.frames = QSpinBox(minimum=1, maximum=256, value=1, objectName="acquire_frames")
         self.frames.setToolTip("frames averaged per capture: noise falls as 1/√frames")
+        self.flood = QDoubleSpinBox(decimals=0, minimum=0.0, maximum=100.0, value=0.0, suffix=" %",
+                                    objectName="acquire_flood")
+        self.flood.setSpecialValueText("off: the scene's own light")
+        self.flood.setToolTip("photograph the scene under a uniform projector flood of this level, for a scene lit "
+                              "by the projector alone (the paper's Figs. 3, 8 and 11); off photographs it under "
+                              "projector black. A rig that knows its scene's light sets it.")
         self.leave_out = QCheckBox("Leave out target pixels the projector cannot reach", objectName="acquire_leave_out")
         self.leave_out.setToolTip("otherwise Start refuses a target with such pixels; left-out pixels keep "
                                   "their colour when the target is recolored")
@@ -163,6 +169,7 @@ class AcquisitionPanel(QWidget):
         form.addRow("Threshold", self.threshold)
         form.addRow("Emission", self.emission)
         form.addRow("Frames averaged", self.frames)
+        form.addRow("Photograph flood", self.flood)
         form.addRow(self.leave_out)
 
         self.targets_label = QLabel(objectName="acquire_targets")
@@ -193,6 +200,7 @@ class AcquisitionPanel(QWidget):
         self._thumbnail_ready.connect(self._on_thumbnail)
         self.set_targets(targets, fixed_kappa)
         self.set_session(session)
+        self.set_rig(rig)  # its scene's light sets the photograph's flood
 
     # ------------------------------------------------------------------ inputs
     @property
@@ -200,10 +208,13 @@ class AcquisitionPanel(QWidget):
         return self.job is not None and self.job.running
 
     def set_rig(self, rig) -> None:
-        """Use ``rig`` for the next run (not while one runs)."""
+        """Use ``rig`` for the next run (not while one runs); a rig that knows its scene's light sets the
+        photograph's flood, unless the session holds a plan (which keeps its own)."""
         if self.busy:
             raise InputError("cannot change the rig while an acquisition runs")
         self.rig = rig
+        if rig is not None and not (self.session is not None and self.session.state.get("plan")):
+            self.flood.setValue(100.0 * float(getattr(rig, "lighting", {}).get("projector_flood", 0.0)))
         self._update()
 
     def set_session(self, session) -> None:
@@ -221,6 +232,7 @@ class AcquisitionPanel(QWidget):
             self.policy.setCurrentIndex([p for _, p in POLICIES].index(policy))
             if adaptive is not None:
                 self.threshold.setValue(100.0 * float(adaptive["threshold"]))
+            self.flood.setValue(_flood_level(session) if plan.get("photograph_pattern") else 0.0)
             kept = len(self._plan_captures())
             if session.state.get("status") == "captured":
                 self._note(f"This session holds an acquisition of {', '.join(plan['targets'])} "
@@ -250,6 +262,13 @@ class AcquisitionPanel(QWidget):
     def capture_settings(self) -> CaptureSettings:
         return CaptureSettings(per_channel=_EMISSIONS[self.emission.currentIndex()][1])
 
+    def photograph_pattern(self) -> np.ndarray | None:
+        """The projector pattern the photograph is taken under: a uniform flood, or None (projector black)."""
+        level = self.flood.value() / 100.0
+        if level <= 0 or self.rig is None:
+            return None
+        return np.full((*self.rig.projector.resolution, 3), level, np.float32)
+
     def adaptive(self) -> Adaptive | None:
         policy = POLICIES[self.policy.currentIndex()][1]
         return None if policy == "brute" else Adaptive(policy, self.threshold.value() / 100.0)
@@ -257,7 +276,7 @@ class AcquisitionPanel(QWidget):
     def _plan_captures(self) -> list[str]:
         if self.session is None:
             return []
-        return [c.name for c in self.session.captures if c.name.startswith("acq-")]
+        return [c.name for c in self.session.captures if c.name.startswith(f"{CAPTURE_PREFIX}-")]
 
     def check_ready(self) -> str:
         """Why a run cannot start now, in plain words; ``""`` when it can."""
@@ -283,6 +302,7 @@ class AcquisitionPanel(QWidget):
             checked = preflight(
                 self.rig, self.session, self.targets, int(self.order.value()), fixed_kappa=self.fixed_kappa,
                 settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
+                photograph_pattern=self.photograph_pattern(),
                 unreachable=Unreachable.LEAVE_OUT if self.leave_out.isChecked() else Unreachable.REFUSE)
         except SessionError as exc:
             # preflight's SessionErrors: no calibration, or another plan in this (calibrated) session
@@ -319,8 +339,8 @@ class AcquisitionPanel(QWidget):
         job = Job(run_on_rig, run_capture, self.rig, self.session, targets, int(self.order.value()),
                   caller=self.ui, fixed_kappa=[k.copy() for k in self.fixed_kappa],
                   settings=self.capture_settings(), adaptive=self.adaptive(), frames=int(self.frames.value()),
-                  on_capture=on_capture, name="Acquiring", synchronous=self.synchronous)
-        job.progress.connect(self._on_progress)
+                  photograph_pattern=self.photograph_pattern(), on_capture=on_capture, name="Acquiring",
+                  synchronous=self.synchronous)
         job.finished.connect(self._on_finished)
         job.failed.connect(self._on_failed)
         job.cancelled.connect(self._on_cancelled)
@@ -334,7 +354,6 @@ class AcquisitionPanel(QWidget):
         self._note("\n".join(notes))
         self.busy_changed.emit(True)
         self.eta.attach(job)
-        self._shots = resumed
         self.started.emit(job)
         job.start()
         if self.busy:  # threaded: lock the controls until it ends (a synchronous run has ended already)
@@ -376,15 +395,9 @@ class AcquisitionPanel(QWidget):
         self.thumbnails.add_thumbnail(name, rgb)
         self.thumbnail_added.emit(name)
 
-    def _on_progress(self, step: int, total: int, _message: str) -> None:
-        self._shots = max(self._shots, int(step))
-
     def _on_finished(self, result) -> None:
         self.result = result
-        shots = max(self._shots, result.captures)
-        lines = [f"Captured {result.images} observation images ({result.predicted} more predicted) in {shots} "
-                 f"camera shots: {result.captures} for the observations, {shots - result.captures} for the "
-                 "direct image D."]
+        lines = [f"Captured {result.report(result.shots)}."]
         lines += self._left_out + [f"{name}: {prepared.report()}" for name, prepared in result.targets]
         if self.session is not None and (line := estimated_report(self.session)):
             lines.append(line + ".")
@@ -417,7 +430,7 @@ class AcquisitionPanel(QWidget):
 
     def _update(self) -> None:
         busy = self.busy
-        for w in (self.order, self.policy, self.emission, self.frames, self.leave_out):
+        for w in (self.order, self.policy, self.emission, self.frames, self.flood, self.leave_out):
             w.setEnabled(not busy)
         self.threshold.setEnabled(not busy and POLICIES[self.policy.currentIndex()][1] != "brute")
         self.start_button.setEnabled(not busy)
@@ -431,3 +444,12 @@ class AcquisitionPanel(QWidget):
             self.targets_label.setText("Targets: " + " → ".join(parts))
         else:
             self.targets_label.setText("No target yet: paint one.")
+
+
+def _flood_level(session) -> float:
+    """The flood (percent) an acquisition in ``session`` photographed its scene under (0 when unknown)."""
+    try:
+        pattern = session.read_array(ACQUISITION_GROUP, PHOTOGRAPH_PATTERN)
+    except SessionError:  # not stored (a session captured before patterns were kept) or unreadable
+        return 0.0
+    return 100.0 * float(np.mean(pattern))

@@ -306,8 +306,7 @@ class RigControl(QObject):
             return
         self.w.preview.rebuild()
         self.w.statusBar().showMessage(
-            f"Acquired {result.targets[-1][0]!r} ({result.images} observation images, {result.predicted} predicted): "
-            "drag its κ sliders", 15000)
+            f"Acquired {result.targets[-1][0]!r} in {result.shots} camera shots: drag its κ sliders", 15000)
 
     def shutdown(self) -> None:
         """The window closes: stop an acquisition (its captures stay in the session), close the rig."""

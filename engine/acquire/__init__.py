@@ -1,7 +1,7 @@
 """Capture plans: calibration runs, single-target acquisition (Sec. 3.3, 6), cascades (Sec. 4)
 and adaptive capture (Sec. 5). Everything talks to a rig through :class:`Recorder` only."""
 
-from engine.acquire.cascade import CascadeResult, acquire_cascade, acquire_single
+from engine.acquire.cascade import CAPTURE_PREFIX, CascadeResult, acquire_cascade, acquire_single
 from engine.acquire.checker import CheckerMeasurement, measure_checker, projector_xy
 from engine.acquire.emission import Emission, Emitter, Negative
 from engine.acquire.predict import Adaptive, Policy, Predictor
@@ -11,6 +11,7 @@ from engine.acquire.steps import Acquisition, CaptureSettings, reemit
 from engine.acquire.target import PreparedTarget, prepare_target
 
 __all__ = [
+    "CAPTURE_PREFIX",
     "Acquisition",
     "Adaptive",
     "CascadeResult",

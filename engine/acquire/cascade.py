@@ -35,6 +35,9 @@ from engine.session.edit import mask_digest, mask_name
 from engine.session.paths import NAME
 from engine.trust import recolor_trusted
 
+#: The names of an acquisition's captures start with this and a hyphen (``acq-photograph``, ``acq-0``, ...).
+CAPTURE_PREFIX = "acq"
+
 
 @dataclass(frozen=True, eq=False)
 class CascadeResult:
@@ -65,6 +68,29 @@ class CascadeResult:
     predicted: int
     captures: int
     log: list = field(default_factory=list)
+
+    def report(self, shots: int) -> str:
+        """What the acquisition cost, in one line for the user.
+
+        Parameters
+        ----------
+        shots : int
+            Camera shots the acquisition holds, the direct image D's included (at least
+            :attr:`captures`).
+
+        Examples
+        --------
+        >>> CascadeResult(None, [], [], images=1, predicted=0, captures=1).report(33)
+        '1 observation image (0 predicted) in 33 camera shots: 1 for the observations, 32 for the direct image D'
+        """
+        shots = max(int(shots), self.captures)
+        return (f"{_count(self.images, 'observation image')} ({self.predicted} predicted) in "
+                f"{_count(shots, 'camera shot')}: {self.captures} for the observations, {shots - self.captures} for "
+                "the direct image D")
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 class _Sequence:
@@ -291,7 +317,7 @@ def acquire_cascade(
     adaptive: Adaptive | None = None,
     photograph_pattern: np.ndarray | None = None,
     prepared=None,
-    prefix: str = "acq",
+    prefix: str = CAPTURE_PREFIX,
 ) -> CascadeResult:
     """Capture the observations of the last of several targets, earlier targets recolored.
 

@@ -21,6 +21,7 @@ from engine.calibrate import (
     fit_crosstalk,
     fit_response,
     gray_code_patterns,
+    projector_lit,
     ramp_levels,
     response_patterns,
 )
@@ -94,7 +95,9 @@ def calibrate_rig(
             "the camera saw no change between projector black and white: is the projector on, "
             "pointed at the scene, and the camera's exposure long enough?"
         )
-    report_ = exposure_report(white, saturated=recorder.last_saturated, black=black)
+    lit = projector_lit(white, black)  # judged where calibration measures: projector light, as the wizard judges
+    report_ = exposure_report(white, saturated=recorder.last_saturated, black=black, target=lit,
+                              label=None if lit is None else "projector-lit pixels")
     noise = _measure_noise(recorder, proj_res)
     gray = gray_code_patterns(proj_res)
     gray_caps = [recorder.capture(f"cal-xor-{i:03d}", p, meta={"kind": "calibration"}) for i, p in enumerate(gray)]

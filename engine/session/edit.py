@@ -201,7 +201,8 @@ class EditAcquisition:
     cascade : tuple of str
         Target names, first acquired to last; the last one's κ stays free.
     kappas : tuple of (3,) tuple of float
-        Each cascade target's κ at acquisition (the earlier ones shaped the emitted light).
+        Each cascade target's κ: the earlier ones' at acquisition (they shaped the emitted light),
+        the last one's as edited (its target's κ).
     decomposition : str
         Session cache key of the last target's decomposition.
     denoise : int

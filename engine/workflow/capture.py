@@ -7,7 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from engine.acquire import Adaptive, CaptureSettings, Recorder, acquire_cascade
+from engine.acquire import CAPTURE_PREFIX, Adaptive, CaptureSettings, Recorder, acquire_cascade
 from engine.acquire.cascade import CascadeResult
 from engine.calibrate import Calibration, fill_correspondence
 from engine.checks import check_kappa, check_mask
@@ -256,10 +256,12 @@ def preflight(
 
 @dataclass(frozen=True, eq=False)
 class CaptureResult(CascadeResult):
-    """What :func:`run_capture` produced: the cascade, and the last target's decomposition and cache key."""
+    """What :func:`run_capture` produced: the cascade, the last target's decomposition and cache key, and
+    ``shots``, the camera shots the session holds for the acquisition (the direct image D's included)."""
 
     decomposition: Decomposition | None = None
     key: str = ""
+    shots: int = 0
 
 
 def run_capture(
@@ -333,7 +335,9 @@ def _capture(rig, session: Session, targets, order, *, fixed_kappa, settings, ad
     )
     key = decomposition_key(session)
     session.cache_put(key, d.to_arrays())
-    return CaptureResult(**{f.name: getattr(result, f.name) for f in fields(CascadeResult)}, decomposition=d, key=key)
+    shots = sum(c.name.startswith(f"{CAPTURE_PREFIX}-") for c in session.captures)
+    return CaptureResult(**{f.name: getattr(result, f.name) for f in fields(CascadeResult)}, decomposition=d, key=key,
+                         shots=max(shots, result.captures))
 
 
 def estimated_report(session: Session) -> str:

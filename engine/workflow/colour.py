@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.acquire import Recorder, measure_checker, prepare_target
+from engine.acquire import CAPTURE_PREFIX, Recorder, measure_checker, prepare_target
 from engine.acquire.target import pattern_budget
 from engine.calibrate import fill_correspondence
 from engine.checker import ILLUMINANT, SENSITIVITIES, Checker, checker_from_corners, detect_checker
@@ -32,8 +32,6 @@ __all__ = ["RELATIVE", "run_checker", "saved_checker", "store_directs", "target_
 #: Why a session without a checker gives relative colours only.
 RELATIVE = ("albedo is relative: no colour checker calibrated this session (measure one in the target's plane "
             "with `albedit checker SESSION`, or the Albedo panel's Checker button)")
-#: Prefix of the captures the acquisition takes (:func:`engine.acquire.acquire_cascade`'s default).
-_ACQUISITION = "acq"
 
 
 def saved_checker(session: Session) -> CheckerRecord | None:
@@ -164,9 +162,9 @@ def target_direct(session: Session, mask) -> np.ndarray | None:
     if plan is None or session.state.get("status") != "captured" or digest not in plan["masks"]:
         return None
     name = plan["targets"][plan["masks"].index(digest)]
-    base = session.read_capture(f"{_ACQUISITION}-black" if plan["photograph_pattern"] else f"{_ACQUISITION}-photograph")
+    base = session.read_capture(f"{CAPTURE_PREFIX}-{'black' if plan['photograph_pattern'] else 'photograph'}")
     recorder = Recorder(_OfflineRig.of(session), session)
-    stem = f"{_ACQUISITION}-{name}"  # with its spread captures, which say where D's corner bias is taken out
+    stem = f"{CAPTURE_PREFIX}-{name}"  # with its spread captures, which say where D's corner bias is taken out
     direct = prepare_target(recorder, load_calibration(session), mask, base, name=stem,
                             spread=session.has_capture(f"{stem}-spread-0")).direct
     try:

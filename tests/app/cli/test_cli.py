@@ -3,6 +3,7 @@
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -42,6 +43,7 @@ def test_demo_runs_the_whole_pipeline_and_scores_it(tmp_path):
     assert plain < 0.5 and ours <= plain
     # noise-free data are left alone
     assert "noise reduction (plain recolor): off: the components' noise is" in result.stderr
+    assert "\r" not in result.stderr  # progress written to a pipe is a list of lines, not a redrawn bar
     for name in ("recolored.exr", "recolored.png", "truth.png", "error.png", "photograph.png"):
         assert (out / name).exists(), name
     assert read_image(out / "recolored.exr").shape == (32, 32, 3)
@@ -133,7 +135,7 @@ def test_capture_opens_the_rig_the_session_was_calibrated_with(tmp_path):
     for session, extra in ((tmp_path / "cal", []), (tmp_path / "s2", ["--calibration", str(tmp_path / "cal")])):
         result = _run("capture", str(session), *extra, "--target", "right_wall", "--order", "1")
         assert result.returncode == 0, result.stderr
-        assert "captured 1 images" in result.stderr
+        assert "captured right_wall at order 1: 1 observation image (0 predicted)" in result.stderr
         assert Session.open(session).camera_resolution == (24, 24)
     changed = _run("capture", str(tmp_path / "cal"), "--resolution", "32", "--target", "right_wall", "--order", "1")
     assert changed.returncode == 1
@@ -241,3 +243,50 @@ def test_a_session_captured_under_a_flood_replays_for_the_noise_aware_recolor(tm
     result = _run("recolor", session, "--target", "right_wall", "--kappa", "2,0.125,8", "-o", str(tmp_path / "x.exr"))
     assert result.returncode == 0, result.stderr
     assert "noise-aware recolor" in result.stderr and "different projector pattern" not in result.stderr, result.stderr
+    # what it cost, counted as the demo and the app count it: the direct image D's shots included
+    shots = re.search(r"captured right_wall at order 2: 2 observation images \(0 predicted\) in (\d+) camera "
+                      r"shots: (\d+) for the observations, (\d+) for the direct image D", captured.stderr)
+    taken = len(list(Path(session, "captures").glob("acq-*")))
+    assert shots and int(shots[1]) == int(shots[2]) + int(shots[3]) == taken
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["demo", "--kappa", "-1,1,1"], "--kappa: kappa must be one or three non-negative numbers, got '-1,1,1'"),
+        (["capture", "{tmp}", "--target", "t", "--flood", "2"], "argument --flood: a projector level must be in 0..1"),
+        (["recolor", "{tmp}", "--kappa", "2", "--half", "-o", "{tmp}/x.png"], "--half writes half floats"),
+        (["export", "{tmp}", "--half", "-o", "{tmp}/x.tif"], "--half writes half floats"),
+        (["demo", "--resolution", "3"], "sides >= 8, got '3' (see `albedit demo --help`)"),
+    ],
+)
+def test_a_usage_error_is_one_line(tmp_path, args, message):
+    """argparse printed its whole usage before the error; a negative κ read as a missing value; --flood 2 and --half
+    with a PNG were not named or not refused."""
+    result = _run(*[a.format(tmp=tmp_path) for a in args])
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and message in result.stderr, result.stderr
+    assert not list(tmp_path.glob("x.*"))
+
+
+def test_a_scene_lit_by_the_projector_is_photographed_under_its_flood(tmp_path):
+    """The floor scene has no lamp: its light is the projector's flood. The demo photographed it under projector
+    black, a black image, and scored 0 % for every method."""
+    result = _run("demo", "-o", str(tmp_path / "f"), "--scene", "floor", "--resolution", "24")
+    assert result.returncode == 0, result.stderr
+    assert "photograph is taken under a flood of 1" in result.stderr
+    headline = re.fullmatch(r"relative error vs ground truth on the surfaces \(ideal rig\): "
+                            r"Albedit ([0-9.]+) %, naive per-pixel recolor ([0-9.]+) %", result.stdout.strip())
+    assert headline, result.stdout  # no lamp to leave out
+    ours, naive = (float(v) for v in headline.groups())
+    assert naive > 1 and ours < 0.1 * naive  # measured 0.01 / 1.78 % at 32²
+    assert read_image(tmp_path / "f" / "photograph.png").mean() > 0.1
+
+
+def test_calibration_reports_each_finding_once_and_judges_exposure_on_projector_light(tmp_path):
+    """The wedge's void (no surface behind it) was reported as under-exposed, with advice to lengthen the exposure,
+    and each problem was printed twice: as a report and as the problem with its fix."""
+    result = _run("calibrate", str(tmp_path / "w"), "--rig", "virtual:wedge", "--resolution", "32")
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count("camera pixels") == 1 and "problem: " in result.stderr  # the void: undecoded
+    assert re.search(r"^ok: 0.0% of \d+ projector-lit pixels saturated", result.stderr, re.M), result.stderr

@@ -68,6 +68,17 @@ def test_the_choice_is_saved_with_the_edit(realistic, tmp_path, capsys):
     np.testing.assert_array_equal(read_image(tmp_path / "c.exr"), read_image(tmp_path / "d.exr"))
 
 
+def test_the_saved_edit_records_the_free_targets_kappa_once(realistic, tmp_path):
+    """The edit's acquisition.kappas ended with the free target's κ of an earlier save (0.3 against the target's
+    0.6): a reader of the session saw two different κ for one target."""
+    session_path = realistic.session.path
+    for k in ("0.3", "0.6"):
+        assert run_command(["recolor", str(session_path), "--kappa", k, "--plain", "-o", str(tmp_path / "x.exr")]) == 0
+    edit = saved_edit(Session.open(session_path))
+    free = next(t for t in edit.targets if t.name == edit.acquisition.cascade[-1])
+    assert free.kappa == (0.6, 0.6, 0.6) and edit.acquisition.kappas[-1] == free.kappa
+
+
 def test_a_session_without_the_acquisition_s_captures_is_written_plainly_with_a_warning(acquired_doc, tmp_path,
                                                                                          capsys):
     from app.model import files

@@ -151,7 +151,7 @@ def test_panel_acquires_a_target_with_thumbnails_pause_and_resume(fresh, make_pa
     assert d.order == 2
     np.testing.assert_array_equal(d.target, result.targets[-1][1].mask)
     shots = len(names)  # the bar and the summary count the same camera shots
-    assert f"Captured 2 observation images (0 more predicted) in {shots} camera shots" in panel.status.text()
+    assert f"Captured 2 observation images (0 predicted) in {shots} camera shots" in panel.status.text()
     assert panel.eta.bar.format() == f"{shots} / {shots} camera shots" and "right_wall: all" in panel.status.text()
     assert dialogs == [] and not panel.busy and panel.start_button.isEnabled()
 
@@ -234,6 +234,7 @@ def test_settings_reach_the_engine(fresh, make_panel):
     rig, session = fresh
     panel = make_panel(rig, session, [("right_wall", rig.targets["right_wall"])])
     assert panel.adaptive() is None and panel.capture_settings().per_channel
+    assert panel.flood.value() == 0 and panel.photograph_pattern() is None  # the Cornell box has its lamp
     panel.policy.setCurrentIndex(1)
     panel.threshold.setValue(2.5)
     panel.emission.setCurrentIndex(1)
@@ -266,6 +267,32 @@ def test_leave_out_trims_only_the_unreachable_pixels(wedge_offset, make_panel, q
     np.testing.assert_array_equal(Session.open(session.path).read_mask(stored), painted & ~bad)
     assert f"{int(bad.sum())} pixels of 'left' the projector cannot reach were left out" in panel.status.text()
     assert dialogs == []
+
+
+def test_a_scene_lit_by_the_projector_is_photographed_under_its_flood(wedge_offset, make_panel, qtbot, tmp_path,
+                                                                       dialogs):
+    """The wedge has no light but the projector's: the app photographed it under projector black (a dark
+    photograph with nothing to recolor); the panel now floods it as its scene says, and a resumed plan keeps its own
+    flood."""
+    rig, template = wedge_offset
+    shutil.copytree(template, tmp_path / "s")
+    session = Session.open(tmp_path / "s")
+    panel = make_panel(rig, session, [("right", rig.targets["right"])])
+    assert panel.flood.value() == 100.0 and panel.flood.isEnabled()  # the scene's natural light
+    panel.order.setValue(2)
+    panel.flood.setValue(60.0)
+    with qtbot.waitSignal(panel.acquired, timeout=TIMEOUT_MS) as blocker:
+        panel.start_button.click()
+    assert dialogs == []
+    stored = Session.open(session.path)
+    assert stored.state["plan"]["photograph_pattern"]
+    np.testing.assert_allclose(stored.read_array("acquisition", "photograph_pattern"), 0.6)
+    photo = blocker.args[0].acquisition.observations[0]
+    lit = rig.targets["right"]
+    np.testing.assert_allclose(photo[lit].mean(), rig.truth.photograph(pattern=np.full(
+        (*rig.projector.resolution, 3), 0.6, np.float32))[lit].mean(), rtol=0.02)
+    again = make_panel(rig, stored, [("right", rig.targets["right"])])
+    assert again.flood.value() == 60.0  # the plan's flood, not the scene's
 
 
 def test_progress_shows_count_and_time_left(qtbot):
