@@ -162,19 +162,19 @@ def run(args) -> int:
         if args.kappa is None:
             args.kappa = demo_kappa(rig, mask)
         session = _demo_session(session_path, rig)
+        # the scene in its natural light, from calibration on: its lamps, or a projector flood (Figs. 3, 8, 11)
+        rig.ambient, level = rig.lighting["ambient"], rig.lighting["projector_flood"]
+        flood = np.full((*rig.projector.resolution, 3), level, np.float32) if level > 0 else None
+        if flood is not None:
+            print(f"the scene is lit by the projector: the photograph is taken under a flood of {level:g}",
+                  file=sys.stderr)
         kind = ("ideal" if args.ideal else "realistic") + (" path-traced" if path_traced else "")
         print(f"calibrating {rig.name} ({kind}, {args.projector}) ...", file=sys.stderr)
         run_calibration(rig, session, progress=ProgressBar())
         print(f"capturing target {target!r} at order {args.order}, {frames} frame(s) per capture, to recolor it "
               f"with κ = ({', '.join(f'{k:g}' for k in args.kappa)}) ...", file=sys.stderr)
         refine = args.edge == "refine" or (args.edge == "auto" and (path_traced or not args.ideal))
-        painted = refined_target(rig, session, mask, frames=frames) if refine else mask
-        # the photograph is taken in the scene's natural light: its lamps, or a projector flood (Figs. 3, 8, 11)
-        rig.ambient, level = rig.lighting["ambient"], rig.lighting["projector_flood"]
-        flood = np.full((*rig.projector.resolution, 3), level, np.float32) if level > 0 else None
-        if flood is not None:
-            print(f"the scene is lit by the projector: the photograph is taken under a flood of {level:g}",
-                  file=sys.stderr)
+        painted = refined_target(rig, session, mask, frames=frames, pattern=flood) if refine else mask
         result = run_capture(
             rig, session, [(target, painted)], args.order,
             adaptive=None if args.adaptive == "brute" else Adaptive(args.adaptive),

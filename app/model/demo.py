@@ -260,10 +260,12 @@ def open_demo(rig_name: str = DEMO_RIG, *, acquire: bool = True, folder=None, pr
 EDGE_PHOTOGRAPH = "edge-photograph"
 
 
-def refined_target(rig, session, mask: np.ndarray, *, frames: int = 1, progress=None) -> np.ndarray:
+def refined_target(rig, session, mask: np.ndarray, *, frames: int = 1, progress=None,
+                   pattern: np.ndarray | None = None) -> np.ndarray:
     """The demo's target as an artist paints it: the scene's mask, its edge refined from a photograph.
 
-    Takes (or reuses) the session's :data:`EDGE_PHOTOGRAPH` and returns
+    Takes (or reuses) the session's :data:`EDGE_PHOTOGRAPH`, under projector black or under
+    ``pattern`` (the flood that lights a scene with no other light), and returns
     :func:`engine.edge.refine_mask` of ``mask`` on it: float coverage, 1 inside, the fraction
     of the target on edge pixels (pixels mixing the target and its neighbour, as every real
     camera and the supersampled realistic rig have). Acquisition re-emits only its solid pixels
@@ -273,7 +275,7 @@ def refined_target(rig, session, mask: np.ndarray, *, frames: int = 1, progress=
     from engine.edge import refine_mask
 
     recorder = Recorder(rig, session, progress=progress, frames=frames)
-    photo = recorder.capture(EDGE_PHOTOGRAPH, recorder.black(), meta={"kind": "edge"})
+    photo = recorder.capture(EDGE_PHOTOGRAPH, recorder.black() if pattern is None else pattern, meta={"kind": "edge"})
     return refine_mask(np.asarray(mask, bool), photo)
 
 
