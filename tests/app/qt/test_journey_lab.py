@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QComboBox, QFileDialog, QMessageBox, QPushButton, QSlider, QWizard
+from PySide6.QtWidgets import QCheckBox, QComboBox, QFileDialog, QMessageBox, QPushButton, QSlider, QWizard
 from scipy.ndimage import binary_erosion
 
 import devices
@@ -27,7 +27,7 @@ from tests.app.qt.user import TIMEOUT_MS, User
 RES = 32
 
 
-def _paint_wall(user: User, window, wall) -> None:
+def paint_wall(user: User, window, wall) -> None:
     """A brush stroke down the middle of the wall (its tallest column, two pixels in)."""
     user.click("target_add")
     user.type_into("brush_size", "2")
@@ -37,11 +37,18 @@ def _paint_wall(user: User, window, wall) -> None:
     user.drag_on_canvas(window.canvas, [(column + 0.5, ys.min() + 0.5), (column + 0.5, ys.max() + 0.5)])
 
 
-def _calibrate(window, qtbot, *, identify: bool) -> None:
-    """Rig ▸ Calibrate through the wizard's pages, as a lab tech clicks them."""
+def calibrate(window, qtbot, *, identify: bool, rig: str | None = None, resolution: int | None = None) -> str:
+    """Rig ▸ Calibrate through the wizard's pages, as a lab tech clicks them (typing ``rig``, an ideal
+    virtual one of ``resolution``², when given); the summary page's text."""
     User(qtbot, window).trigger("calibrate")
     wizard = window.findChild(QWizard, "calibration_wizard")
     w = User(qtbot, wizard)
+    if rig is not None:
+        w.type_into("wizard_rig_name", rig, enter=False)
+        if not w.find("wizard_ideal", QCheckBox).isChecked():
+            w.click("wizard_ideal")
+        for side in ("wizard_res_h", "wizard_res_w"):
+            w.type_into(side, str(resolution), enter=False)
     w.click("wizard_next")
     w.click("wizard_next")  # opens the rig (a worker builds the virtual set-up), then moves on
     qtbot.waitUntil(lambda: wizard.currentId() == wizard.PAGE_EXPOSURE, timeout=TIMEOUT_MS)
@@ -67,8 +74,9 @@ def _calibrate(window, qtbot, *, identify: bool) -> None:
     w.click("wizard_next")
     assert wizard.currentId() == wizard.PAGE_RESULTS
     w.click("wizard_next")
-    assert "Nothing to fix" in wizard.summary_page.text.toPlainText()
+    summary = wizard.summary_page.text.toPlainText()
     w.click("wizard_finish")
+    return summary
 
 
 def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monkeypatch, dialogs):
@@ -80,9 +88,9 @@ def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monk
     window.open_path(tmp_path / "room.exr")
     qtbot.waitUntil(lambda: window.doc is not None and window.job is None, timeout=TIMEOUT_MS)
 
-    _calibrate(window, qtbot, identify=True)
+    assert "Nothing to fix" in calibrate(window, qtbot, identify=True)
     assert window.rig is not None and window.session is not None
-    _paint_wall(user, window, wall)
+    paint_wall(user, window, wall)
     doc = window.doc
     target = doc.target(doc.current)
 
@@ -160,7 +168,7 @@ def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monk
     qtbot.waitUntil(lambda: window.doc is not doc and window.job is None, timeout=TIMEOUT_MS)
     assert window.rig is not None and not window.rig.closed  # opening a document keeps the rig
     assert panel.session is window.session and [n for n, _ in panel.targets] == ["left wall"]
-    _calibrate(window, qtbot, identify=False)  # the wizard starts from the open rig
+    assert "Nothing to fix" in calibrate(window, qtbot, identify=False)  # the wizard starts from the open rig
     assert window.session.read_calibration()[0]  # the session took the new calibration
     with qtbot.waitSignal(panel.acquired, timeout=TIMEOUT_MS):
         user.click("acquire_start")
