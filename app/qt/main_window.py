@@ -135,6 +135,7 @@ class MainWindow(QMainWindow):
         sb = self.statusBar()
         sb.setObjectName("status")
         self.readout = QLabel(objectName="readout")
+        self._cursor: tuple[int, int] | None = None  # the image pixel under the mouse, for the readout
         self.readout.setMinimumWidth(380)
         self.readout.setStyleSheet("font-family: monospace;")
         self.note = QLabel(objectName="view_note")
@@ -188,6 +189,7 @@ class MainWindow(QMainWindow):
         self.preview.detail_ready.connect(self.canvas.set_detail)
         self.canvas.viewport_changed.connect(self.preview.set_viewport)
         self.preview.failed.connect(lambda msg: self.statusBar().showMessage(msg, 8000))
+        self._cursor = None  # a new canvas: nothing under the mouse yet
         self.canvas.cursor_moved.connect(self._on_cursor)
         self.canvas.zoom_changed.connect(lambda z: self.zoom_label.setText(f"{100 * z:.0f} %"))
         self.zoom_label.setText(f"{100 * self.canvas.zoom:.0f} %")  # the fit already happened
@@ -310,8 +312,10 @@ class MainWindow(QMainWindow):
             return
         self.canvas.set_frame(frame)
         self.note.setText(frame.note)
+        self._on_cursor(self._cursor)  # the readout reads what is shown now (a κ drag, an acquisition)
 
     def _on_cursor(self, pos) -> None:
+        self._cursor = pos
         if pos is None or self.preview is None:
             self.readout.setText("")
             return

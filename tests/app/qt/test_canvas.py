@@ -111,6 +111,9 @@ def test_brush_size_keys_polygon_enter_and_cursor_readout(window, qtbot):
     qtbot.mouseMove(c, _widget(18.5, 3.5))
     assert window.readout.text().startswith("x    18  y     3") and "naive recolor: R 0.25" in window.readout.text()
     assert "[a]" in window.readout.text()
+    # κ changes and the mouse stays: the readout reads the new preview (it kept the old value until the mouse moved)
+    window.doc.set_kappa(window.doc.current, (2.0, 2.0, 2.0))
+    qtbot.waitUntil(lambda: "naive recolor: R 0.5 " in window.readout.text(), timeout=5000)
 
 
 def test_split_divider_drags(make_window, acquired_doc, qtbot):
