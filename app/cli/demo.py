@@ -118,15 +118,18 @@ def _demo_session(path: Path, rig) -> Session:
     A session of another set-up (projector pose, camera model, resolution, scene) would have its
     captures scored against this set-up's truth: the co-axial captures reused for ``--projector
     offset`` scored 0.14 % where a fresh offset run scores 1.40 %. A demo session too old to
-    record its set-up is refused as well (demo sessions are cheap to make again).
+    record its set-up is refused as well (demo sessions are cheap to make again), and so is one
+    of a scene lit by the projector made before the demo lit such scenes by it (its calibration
+    saw the scene's other lamp, its photographs projector black).
     """
     try:
-        session = open_session_for_rig(path, rig, demo=True)
+        session = open_session_for_rig(path, rig, demo=True, natural_light=True)
     except SessionError as exc:
         raise InputError(f"{exc}, or add --fresh to replace it") from None
-    if session.fingerprint is None:
-        raise InputError(f"{path} holds a demo session too old to record its set-up: add --fresh to replace it, "
-                         "or choose another --output")
+    unlit = rig.lighting["projector_flood"] > 0 and not session.metadata.get("natural_light")
+    if session.fingerprint is None or unlit:
+        raise InputError(f"{path} holds a demo session too old to record its set-up"
+                         f"{' and light' if unlit else ''}: add --fresh to replace it, or choose another --output")
     return session
 
 

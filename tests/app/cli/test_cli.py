@@ -200,6 +200,20 @@ def test_demo_refuses_a_folder_of_another_set_up_and_fresh_replaces_it(tmp_path)
     assert _run("demo", "-o", out, "--resolution", "16", "--projector", "offset").returncode == 0  # the same again
 
 
+def test_demo_refuses_a_projector_lit_scenes_session_from_before_it_was_lit_so(tmp_path):
+    """A wedge demo folder from before the demo lit the wedge by its projector stopped at the edge photograph
+    ("taken with a different projector pattern ... use a new session folder") with a calibration that had seen the
+    overhead lamp: it is refused up front, naming --fresh."""
+    import devices
+    from engine.workflow import open_session_for_rig
+
+    with devices.open_rig("virtual:wedge", ideal=True, resolution=(16, 16), projector="coaxial", seed=0) as rig:
+        open_session_for_rig(tmp_path / "d" / "session", rig, demo=True)  # what the demo recorded before
+    result = _run("demo", "-o", str(tmp_path / "d"), "--scene", "wedge", "--resolution", "16")
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    assert "too old to record its set-up and light: add --fresh" in result.stderr.strip().splitlines()[-1]
+
+
 def test_an_order_1_demo_is_the_naive_recolor_and_says_why_it_is_plain(tmp_path):
     """At order 1 the noise-aware recolor had no order to smooth and no target, and wrote the photograph unchanged
     (50 % against the naive 18.6 %) while the metadata said κ = (2, 0.125, 8); κ times the photograph is all an
