@@ -126,10 +126,11 @@ def _demo_session(path: Path, rig) -> Session:
         session = open_session_for_rig(path, rig, demo=True, natural_light=True)
     except SessionError as exc:
         raise InputError(f"{exc}, or add --fresh to replace it") from None
-    unlit = rig.lighting["projector_flood"] > 0 and not session.metadata.get("natural_light")
-    if session.fingerprint is None or unlit:
+    lit_otherwise = rig.lighting["projector_flood"] > 0 and not session.metadata.get("natural_light")
+    if session.fingerprint is None or lit_otherwise:
         raise InputError(f"{path} holds a demo session too old to record its set-up"
-                         f"{' and light' if unlit else ''}: add --fresh to replace it, or choose another --output")
+                         f"{' and light' if lit_otherwise else ''}: add --fresh to replace it, or choose another "
+                         "--output")
     return session
 
 
