@@ -214,8 +214,16 @@ class AcquisitionPanel(QWidget):
             raise InputError("cannot change the rig while an acquisition runs")
         self.rig = rig
         if rig is not None and not (self.session is not None and self.session.state.get("plan")):
-            self.flood.setValue(100.0 * float(getattr(rig, "lighting", {}).get("projector_flood", 0.0)))
+            self._scene_flood(unknown=0.0)
         self._update()
+
+    def _scene_flood(self, unknown: float | None = None) -> None:
+        """Set the photograph's flood (percent) to the natural light of the rig's scene; to ``unknown`` for a
+        rig that does not know its scene (None: leave it as the user set it)."""
+        lighting = getattr(self.rig, "lighting", None)
+        level = unknown if lighting is None else 100.0 * float(lighting.get("projector_flood", 0.0))
+        if level is not None:
+            self.flood.setValue(level)
 
     def set_session(self, session) -> None:
         """Use ``session``; an interrupted plan in it sets the controls so Resume continues it."""
@@ -240,6 +248,8 @@ class AcquisitionPanel(QWidget):
             else:
                 self._note(f"An interrupted acquisition of {', '.join(plan['targets'])} (order {plan['order']}) "
                            f"is in this session with {kept} captures: Resume continues it.")
+        else:  # the previous session's plan no longer sets the flood
+            self._scene_flood()
         self._update()
 
     def set_targets(self, targets, fixed_kappa=()) -> None:

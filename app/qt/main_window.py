@@ -147,6 +147,8 @@ class MainWindow(QMainWindow):
         self.progress = JobProgress("job_progress", hide_when_idle=True)
         self.progress.label.setMinimumWidth(240)
         self.progress.setMaximumWidth(640)
+        self.readout.hide()  # until the mouse is over the image: a temporary message has its room
+        sb.messageChanged.connect(lambda m: m and sb.setToolTip(f"Last message: {m}"))  # when it is clipped or gone
         sb.addWidget(self.note, 1)  # temporary messages cover this one only
         sb.addPermanentWidget(self.recolor_mode)
         sb.addPermanentWidget(self.readout)
@@ -318,6 +320,7 @@ class MainWindow(QMainWindow):
         self._cursor = pos
         if pos is None or self.preview is None:
             self.readout.setText("")
+            self.readout.hide()
             return
         x, y = pos
         value = self.preview.readout(x, y)
@@ -329,6 +332,7 @@ class MainWindow(QMainWindow):
         if names:
             text += f"   [{', '.join(names)}]"
         self.readout.setText(text)
+        self.readout.show()
 
     # ================================================================== user actions
     def set_tool(self, tool: Tool | str) -> None:

@@ -293,6 +293,9 @@ def test_a_scene_lit_by_the_projector_is_photographed_under_its_flood(wedge_offs
         (*rig.projector.resolution, 3), 0.6, np.float32))[lit].mean(), rtol=0.02)
     again = make_panel(rig, stored, [("right", rig.targets["right"])])
     assert again.flood.value() == 60.0  # the plan's flood, not the scene's
+    shutil.copytree(template, tmp_path / "t")
+    again.set_session(Session.open(tmp_path / "t"))  # no plan: the scene's light again, not the last plan's
+    assert again.flood.value() == 100.0
 
 
 def test_progress_shows_count_and_time_left(qtbot):

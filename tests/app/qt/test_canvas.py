@@ -114,6 +114,11 @@ def test_brush_size_keys_polygon_enter_and_cursor_readout(window, qtbot):
     # κ changes and the mouse stays: the readout reads the new preview (it kept the old value until the mouse moved)
     window.doc.set_kappa(window.doc.current, (2.0, 2.0, 2.0))
     qtbot.waitUntil(lambda: "naive recolor: R 0.5 " in window.readout.text(), timeout=5000)
+    assert window.readout.isVisible()
+    c.cursor_moved.emit(None)  # the mouse leaves the image: the readout gives its room to the status messages
+    assert not window.readout.isVisible()
+    window.statusBar().showMessage("Acquired 'a' in 12 camera shots", 10)  # a message clipped or expired
+    assert window.statusBar().toolTip() == "Last message: Acquired 'a' in 12 camera shots"
 
 
 def test_split_divider_drags(make_window, acquired_doc, qtbot):
