@@ -15,9 +15,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from PySide6.QtCore import QEvent, QObject
+from PySide6.QtCore import QEvent, QObject, Qt
 from PySide6.QtGui import QAction, QActionGroup, QKeySequence
-from PySide6.QtWidgets import QAbstractSpinBox, QApplication, QDoubleSpinBox, QLineEdit, QSpinBox, QWidget
+from PySide6.QtWidgets import (
+    QAbstractSpinBox,
+    QApplication,
+    QDoubleSpinBox,
+    QLineEdit,
+    QSpinBox,
+    QToolBar,
+    QWidget,
+)
 
 from app.model.painting import Painter, Tool
 from app.model.views import VIEWS, CanvasView
@@ -306,3 +314,22 @@ def _install_toolbars(window) -> None:
             else:
                 tb.addAction(e)
                 tb.widgetForAction(e).setObjectName(f"{e.objectName()}_button")
+
+
+def wrap_toolbars(window) -> None:
+    """Start a new row of the window's top toolbars where the next one would not fit beside those before it.
+
+    Qt keeps a row of toolbars on one line and hides what does not fit behind a » button (on a
+    1366 px laptop: the View toolbar's Noise σ, exposure and zoom); this wraps them instead, and
+    joins the rows again when the window is wide enough. Called on every resize.
+    """
+    used = 0
+    for name, _title, _entries in TOOLBARS:
+        tb = window.findChild(QToolBar, name)
+        if tb is None or tb.isHidden() or window.toolBarArea(tb) != Qt.ToolBarArea.TopToolBarArea:
+            continue
+        need = tb.sizeHint().width()
+        wrap = used > 0 and used + need > window.width()
+        if wrap != window.toolBarBreak(tb):
+            (window.insertToolBarBreak if wrap else window.removeToolBarBreak)(tb)
+        used = need if wrap else used + need

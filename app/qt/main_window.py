@@ -671,5 +671,6 @@ class MainWindow(QMainWindow):
 
     def resizeEvent(self, e) -> None:  # noqa: N802
         super().resizeEvent(e)
+        actions.wrap_toolbars(self)
         if self.preview is not None and self.preview.view == CanvasView.COMPONENTS:
             self._update_grid()

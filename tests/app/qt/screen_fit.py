@@ -31,7 +31,9 @@ from PySide6.QtWidgets import (
 #: Controls that must be reachable in the main window (docs/ui.md names).
 MAIN_CONTROLS = ("canvas", "targets_list", "target_add", "target_remove", "kappa_R", "kappa_G", "kappa_B",
                  "kappa_R_value", "kappa_G_value", "kappa_B_value", "kappa_link", "kappa_reset", "noise_radius",
-                 "noise_apply", "status", "acquire_start", "acquire_progress_pause", "acquire_progress_cancel")
+                 "noise_apply", "status", "acquire_start", "acquire_progress_pause", "acquire_progress_cancel",
+                 "brush_size", "fill_tolerance", "refine_edge_button", "view_recolored_button", "view_error_button",
+                 "view_noise_button", "display_exposure", "fit_button", "zoom_100_button")
 WIZARD_CONTROLS = ("wizard_next", "wizard_back", "wizard_cancel")
 LAST_PAGE_CONTROLS = ("wizard_finish", "wizard_cancel")
 

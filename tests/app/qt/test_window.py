@@ -373,3 +373,20 @@ def test_job_progress_offers_pause_and_cancel_only_where_they_work(make_window, 
     w.noise_panel.radius.setValue(2)
     w.noise_panel.apply.click()
     assert shown["Noise reduction"] == (True, True)
+
+
+def test_toolbars_wrap_onto_a_second_row_when_the_window_is_narrow(make_window, acquired_doc, qtbot):
+    """On a laptop-wide window the View toolbar's end (Noise σ, exposure, zoom) was hidden behind »."""
+    from PySide6.QtWidgets import QToolBar
+
+    w = make_window(acquired_doc)
+    tools, view = w.findChild(QToolBar, "tools"), w.findChild(QToolBar, "view")
+    w.resize(tools.sizeHint().width() + view.sizeHint().width() + 40, 800)
+    qtbot.waitUntil(lambda: not w.toolBarBreak(view))
+    qtbot.waitUntil(lambda: view.geometry().top() == tools.geometry().top())  # one row
+    w.resize(tools.sizeHint().width() + 40, 800)
+    qtbot.waitUntil(lambda: w.toolBarBreak(view))
+    qtbot.waitUntil(lambda: view.geometry().top() >= tools.geometry().bottom())  # its own row, nothing hidden
+    assert view.geometry().width() >= view.sizeHint().width()
+    w.resize(tools.sizeHint().width() + view.sizeHint().width() + 40, 800)
+    qtbot.waitUntil(lambda: not w.toolBarBreak(view))  # wide again: one row again
