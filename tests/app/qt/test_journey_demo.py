@@ -55,7 +55,9 @@ def test_the_artist_on_the_demo(make_window, qtbot, tmp_path, monkeypatch, dialo
     painted = int(new.mask.sum())
     user.press(Qt.Key.Key_E)
     user.drag_on_canvas(window.canvas, [(24, 11), (24, 17)])
-    assert 0 < int(new.mask.sum()) < painted and not new.mask[14, 24] and new.mask[14, 21]
+    # the eraser cut the top and bottom strokes where it crossed them, and left them beside the cut
+    assert 0 < int(new.mask.sum()) < painted and not new.mask[12, 24] and not new.mask[16, 24]
+    assert new.mask[12, 20] and new.mask[16, 20] and new.mask[12, 28] and new.mask[16, 28]
 
     # include only it: the demo's targets are left out already, the acquired right wall too now
     user.toggle_row(lst, 2)
