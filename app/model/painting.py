@@ -305,6 +305,8 @@ class Painter:
 
     def _handle(self, event: MouseEvent) -> bool:
         uid = self.doc.current
+        if uid == -1 and event.type == EventType.PRESS and not self.doc.targets and self._adds(event):
+            uid = self.doc.add_target().uid  # the first stroke on a new photograph starts its first target
         if uid == -1:
             if event.type == EventType.PRESS:
                 self.doc.events.warning.emit("add or select a target before painting")
@@ -319,6 +321,10 @@ class Painter:
             self.fill(uid, event.x, event.y, subtract=event.subtract)
             return True
         return False
+
+    def _adds(self, event: MouseEvent) -> bool:
+        """The event would add to a mask (not the eraser, not a subtracting modifier)."""
+        return self.tool != Tool.ERASER and not event.subtract
 
     def cancel(self) -> None:
         """Escape: drop an unfinished polygon/lasso; close an open stroke."""

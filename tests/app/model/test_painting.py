@@ -183,7 +183,25 @@ def test_brush_size_keys_and_painting_without_target():
     p.set_size(0)
     p.shrink()
     assert p.size == 1.0
-    assert not p.handle(press(1, 1)) and "add or select a target" in warnings[-1]
+    p.set_tool(Tool.ERASER)
+    assert not p.handle(press(1, 1)) and "add or select a target" in warnings[-1]  # nothing to erase
+    assert doc.targets == []
+    # the first brush stroke on a photograph without targets starts one (it warned and painted nothing)
+    p.set_tool(Tool.BRUSH)
+    p.set_size(3)
+    assert p.handle(press(1, 1))
+    p.handle(release(1, 1))
+    assert [t.name for t in doc.targets] == ["target 1"] and doc.current == doc.targets[0].uid
+    assert doc.targets[0].mask[1, 1]
+    doc.history.undo()
+    assert len(doc.targets) == 1 and not doc.targets[0].mask.any()  # the stroke, then the target
+    doc.history.undo()
+    assert doc.targets == []
+    doc.add_target("a")
+    doc.add_target("b")
+    doc.set_current(-1)  # targets but none selected: which one is the user's to say
+    n = len(warnings)
+    assert not p.handle(press(1, 1)) and len(warnings) == n + 1 and "add or select a target" in warnings[-1]
 
 
 def test_refused_edit_becomes_a_warning_not_an_exception(acquired_doc):

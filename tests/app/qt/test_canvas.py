@@ -164,3 +164,21 @@ def test_zoomed_in_past_the_preview_the_visible_region_sharpens_to_export_pixels
     preview.max_shape = (1080, 1920)
     preview.rebuild()
     assert not preview.wants_detail()
+
+
+def test_the_first_stroke_on_a_photograph_without_targets_starts_one(make_window, qtbot):
+    """Opening a photograph and painting on it warned 'add or select a target before painting' and painted
+    nothing; the first stroke now starts 'target 1', shown in the Targets panel and in the Albedo panel."""
+    from PySide6.QtWidgets import QListWidget
+
+    from tests.app.qt.user import User
+
+    doc = Document(np.full((40, 60, 3), 0.25, np.float32))
+    doc.mark_saved()
+    w = make_window(doc)
+    user = User(qtbot, w)
+    w.set_tool(Tool.BRUSH)
+    user.drag_on_canvas(w.canvas, [(10, 10), (20, 12)])
+    assert user.rows(user.find("targets_list", QListWidget)) == ["target 1"]
+    assert doc.targets[0].mask[11, 15] and doc.current == doc.targets[0].uid
+    assert w.albedo_panel.findChild(object, "kappa_R_value").isEnabled()
