@@ -41,6 +41,13 @@ class Need(StrEnum):
     TRUTH = "truth"  # ground truth (virtual rigs)
 
 
+#: What the user can do about each missing :class:`Need` (a disabled view or action says it).
+NEED_HINTS = {
+    Need.DECOMPOSITION: "acquire a target first (Rig ▸ Acquire…)",
+    Need.TRUTH: "only a simulated rig's scene has a ground truth",
+}
+
+
 #: What the recolored views say while nothing is measured (drawn as a banner over the picture).
 NAIVE_BANNER = ("Naive preview: each target's pixels are multiplied by its κ. Interreflections follow only once "
                 "the scene is captured with a rig (Rig ▸ Calibrate…, then Rig ▸ Acquire…).")

@@ -28,7 +28,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.model.painting import Painter, Tool
-from app.model.views import VIEWS, CanvasView
+from app.model.views import NEED_HINTS, VIEWS, CanvasView, Need
 
 K = QKeySequence.StandardKey
 
@@ -62,16 +62,18 @@ class ActionSpec:
     checked: bool = False
 
 
-#: When actions are enabled (the window evaluates each by name).
+#: When actions are enabled (the window evaluates each by name), each with what the user can do when it does not
+#: hold: a disabled action's tooltip says it (menus show tooltips). Every condition but ``always``, ``rig`` and
+#: ``last_rig`` also needs an open document and no running job.
 CONDITIONS = {
-    "always": "always",
-    "idle": "no job is running",
-    "document": "a document is open and no job runs",
-    "editable_target": "a target is selected whose mask is not locked by an acquisition",
-    "decomposition": "the document holds an acquisition",
-    "acquirable": "a rig is open (or can be reopened) and a document is open",
-    "rig": "a rig is open",
-    "last_rig": "no rig is open and one was opened before",
+    "always": "",
+    "idle": "wait for the running job to end",
+    "document": "open a session or an image first (File ▸ Open)",
+    "editable_target": "select a target whose mask is not locked by an acquisition",
+    "decomposition": NEED_HINTS[Need.DECOMPOSITION],
+    "acquirable": "open a rig first (Rig ▸ Calibrate Rig…)",
+    "rig": "no rig is open",
+    "last_rig": "a rig is open, or none was opened before",
 }
 
 ACTIONS: tuple[ActionSpec, ...] = (
@@ -260,6 +262,7 @@ def _install_menus(window) -> None:
     for name, title, entries in MENUS:
         menu = window.menuBar().addMenu(title)
         menu.setObjectName(name)
+        menu.setToolTipsVisible(True)  # a disabled entry's tooltip says why (:data:`CONDITIONS`)
         for e in _entries(window, entries):
             if e == "-":
                 menu.addSeparator()

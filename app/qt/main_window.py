@@ -32,7 +32,7 @@ from app.model.document import Document
 from app.model.history import History
 from app.model.painting import Painter, Tool
 from app.model.render import component_grid
-from app.model.views import CanvasView
+from app.model.views import NEED_HINTS, CanvasView
 from app.qt import actions
 from app.qt.actions import KeepAppShortcuts
 from app.qt.canvas import Canvas
@@ -288,18 +288,31 @@ class MainWindow(QMainWindow):
             "last_rig": self.rigs.rig is None and self.rigs.last is not None,
         }[name]
 
+    def why_not(self, name: str) -> str:
+        """What the user can do for the condition ``name`` of :data:`app.qt.actions.CONDITIONS` to hold."""
+        if self.job is not None and name not in ("always", "rig", "last_rig"):
+            return f"wait for {self.job.name} to end"
+        if self.doc is None and name not in ("always", "idle", "rig", "last_rig"):
+            return actions.CONDITIONS["document"]
+        return actions.CONDITIONS[name]
+
     def _update_actions(self, *_args) -> None:
         for name, when in self.when.items():
             if name not in ("undo", "redo"):  # the undo group enables those
-                getattr(self, f"act_{name}").setEnabled(self.condition(when))
-        self.act_export.setToolTip(self.act_export.statusTip() if self.condition("decomposition")
-                                   else "Acquire first: export needs a decomposition")
+                action, ok = getattr(self, f"act_{name}"), self.condition(when)
+                action.setEnabled(ok)
+                tip = action.statusTip() or action.text().replace("&", "")
+                action.setToolTip(tip if ok else f"{tip} (unavailable: {self.why_not(when)})")
         last = self.rigs.last
         self.act_reopen_rig.setText(f"&Reopen {last[0]}" if last else "&Reopen Last Rig")
         for a in self.tool_actions.values():
             a.setEnabled(self.condition("document"))
         for view, a in self.view_actions.items():
-            a.setEnabled(self.doc is not None and self.preview is not None and self.preview.available(view))
+            missing = [] if self.doc is None or self.preview is None else self.preview.missing(view)
+            ok = self.doc is not None and self.preview is not None and not missing
+            why = "; ".join(NEED_HINTS[n] for n in missing) or actions.CONDITIONS["document"]
+            a.setEnabled(ok)
+            a.setToolTip(a.statusTip() if ok else f"{a.statusTip()} (unavailable: {why})")
         if self.colour_panel is not None:
             self.colour_panel.can_measure = self.condition("rig") and self.session is not None
             self.colour_panel.refresh()

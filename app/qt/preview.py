@@ -142,8 +142,12 @@ class PreviewController(QObject):
 
     def available(self, view: CanvasView) -> bool:
         """Whether ``view`` can be shown for this document (it has everything the view needs)."""
+        return not self.missing(view)
+
+    def missing(self, view: CanvasView) -> list[Need]:
+        """What ``view`` needs that this document does not have."""
         have = {Need.DECOMPOSITION: self.doc.decomposition is not None, Need.TRUTH: self.doc.truth is not None}
-        return all(have[n] for n in views.VIEW_SPECS[CanvasView(view)].needs)
+        return [n for n in sorted(views.VIEW_SPECS[CanvasView(view)].needs) if not have[n]]
 
     # ------------------------------------------------------------------ requests
     def rebuild(self) -> None:

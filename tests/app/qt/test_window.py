@@ -77,7 +77,22 @@ def test_views_are_offered_when_they_make_sense(make_window, synthetic, acquired
     enabled = {v for v, a in bare.view_actions.items() if a.isEnabled()}
     assert enabled == {CanvasView.RECOLORED, CanvasView.ORIGINAL, CanvasView.SPLIT, CanvasView.DIFFERENCE}
     assert not bare.act_export.isEnabled()
+    # a disabled entry says why, in its tooltip (shown by the menus too)
+    assert bare.act_export.toolTip().endswith("(unavailable: acquire a target first (Rig ▸ Acquire…))")
+    assert "unavailable: acquire a target first" in bare.view_actions[CanvasView.COMPONENTS].toolTip()
+    assert "acquire a target first" in bare.view_actions[CanvasView.ERROR].toolTip()
+    assert "ground truth" in bare.view_actions[CanvasView.TRUTH].toolTip()
+    assert all(a.menu().toolTipsVisible() for a in bare.menuBar().actions())
+    assert "unavailable" not in bare.act_save.toolTip()
+    seen = []
+    bare.run_job(lambda progress=None, should_stop=None: seen.append(bare.act_save.toolTip()), name="Exporting")
+    assert seen and seen[0].endswith("(unavailable: wait for Exporting to end)")
+    empty = make_window()
+    assert empty.act_save.toolTip().endswith("(unavailable: open a session or an image first (File ▸ Open))")
+    assert empty.view_actions[CanvasView.ORIGINAL].toolTip().endswith("(unavailable: open a session or an image "
+                                                                     "first (File ▸ Open))")
     w = make_window(acquired_doc)
+    assert not any("unavailable" in a.toolTip() for a in w.view_actions.values())
     assert all(a.isEnabled() for a in w.view_actions.values())
     w.set_view(CanvasView.TRUTH)
     wall = acquired_doc.by_name("wall")
