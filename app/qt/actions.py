@@ -63,8 +63,8 @@ class ActionSpec:
 
 
 #: When actions are enabled (the window evaluates each by name), each with what the user can do when it does not
-#: hold: a disabled action's tooltip says it (menus show tooltips). Every condition but ``always``, ``rig`` and
-#: ``last_rig`` also needs an open document and no running job.
+#: hold: a disabled action's tooltip says it (menus show tooltips). Every condition but ``always`` and
+#: ``last_rig`` also needs no running job, and all but those and ``idle`` an open document.
 CONDITIONS = {
     "always": "",
     "idle": "wait for the running job to end",

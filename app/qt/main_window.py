@@ -290,9 +290,11 @@ class MainWindow(QMainWindow):
 
     def why_not(self, name: str) -> str:
         """What the user can do for the condition ``name`` of :data:`app.qt.actions.CONDITIONS` to hold."""
-        if self.job is not None and name not in ("always", "rig", "last_rig"):
+        if name in ("always", "last_rig"):  # these hold with or without a document or a job
+            return actions.CONDITIONS[name]
+        if self.job is not None:
             return f"wait for {self.job.name} to end"
-        if self.doc is None and name not in ("always", "idle", "rig", "last_rig"):
+        if self.doc is None and name != "idle":
             return actions.CONDITIONS["document"]
         return actions.CONDITIONS[name]
 

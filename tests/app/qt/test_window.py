@@ -87,6 +87,8 @@ def test_views_are_offered_when_they_make_sense(make_window, synthetic, acquired
     seen = []
     bare.run_job(lambda progress=None, should_stop=None: seen.append(bare.act_save.toolTip()), name="Exporting")
     assert seen and seen[0].endswith("(unavailable: wait for Exporting to end)")
+    assert "(unavailable: open a rig first" in bare.act_acquire.toolTip()
+    assert bare.act_close_rig.toolTip().endswith("(unavailable: no rig is open)")
     empty = make_window()
     assert empty.act_save.toolTip().endswith("(unavailable: open a session or an image first (File ▸ Open))")
     assert empty.view_actions[CanvasView.ORIGINAL].toolTip().endswith("(unavailable: open a session or an image "
