@@ -301,20 +301,16 @@ class MainWindow(QMainWindow):
     def _update_actions(self, *_args) -> None:
         for name, when in self.when.items():
             if name not in ("undo", "redo"):  # the undo group enables those
-                action, ok = getattr(self, f"act_{name}"), self.condition(when)
-                action.setEnabled(ok)
-                tip = action.statusTip() or action.text().replace("&", "")
-                action.setToolTip(tip if ok else f"{tip} (unavailable: {self.why_not(when)})")
+                _offer(getattr(self, f"act_{name}"), "" if self.condition(when) else self.why_not(when))
         last = self.rigs.last
         self.act_reopen_rig.setText(f"&Reopen {last[0]}" if last else "&Reopen Last Rig")
         for a in self.tool_actions.values():
             a.setEnabled(self.condition("document"))
         for view, a in self.view_actions.items():
-            missing = [] if self.doc is None or self.preview is None else self.preview.missing(view)
-            ok = self.doc is not None and self.preview is not None and not missing
-            why = "; ".join(NEED_HINTS[n] for n in missing) or actions.CONDITIONS["document"]
-            a.setEnabled(ok)
-            a.setToolTip(a.statusTip() if ok else f"{a.statusTip()} (unavailable: {why})")
+            if self.doc is None or self.preview is None:
+                _offer(a, actions.CONDITIONS["document"])
+            else:
+                _offer(a, "; ".join(NEED_HINTS[n] for n in self.preview.missing(view)))
         if self.colour_panel is not None:
             self.colour_panel.can_measure = self.condition("rig") and self.session is not None
             self.colour_panel.refresh()
@@ -689,3 +685,10 @@ class MainWindow(QMainWindow):
         actions.wrap_toolbars(self)
         if self.preview is not None and self.preview.view == CanvasView.COMPONENTS:
             self._update_grid()
+
+
+def _offer(action, why: str) -> None:
+    """Enable ``action`` when ``why`` is empty; else disable it, its tooltip ending in what the user can do."""
+    tip = action.statusTip() or action.text().replace("&", "")
+    action.setEnabled(not why)
+    action.setToolTip(f"{tip} (unavailable: {why})" if why else tip)
