@@ -33,6 +33,7 @@ from engine.trust import recolor_trusted
 from engine.workflow import (
     cached_decomposition,
     denoised_key,
+    interrupted_edit,
     load_calibration,
     load_decomposition,
     load_trusted,
@@ -128,7 +129,7 @@ def _calibrated_unreachable(session: Session) -> np.ndarray | None:
 
 
 def _document_from_session(session: Session, *, history=None) -> tuple[Document, list[str]]:
-    edit = saved_edit(session)
+    edit = saved_edit(session) or interrupted_edit(session)  # an unsaved, unfinished acquisition: resumable
     photo = session.read_capture(photograph_name(session, edit))
     unreachable = session.read_mask(UNREACHABLE) if UNREACHABLE in session.masks else _calibrated_unreachable(session)
     source = session.metadata.get("source")  # a session made from a document records where its photograph came from
@@ -140,6 +141,8 @@ def _document_from_session(session: Session, *, history=None) -> tuple[Document,
             target = doc.add_target(t.name, session.read_mask(t.mask), kappa=t.kappa)
             if t.colour is not None:
                 target.colour = t.colour
+            if not t.included:
+                doc.set_included(target.uid, False)
         except (InputError, SessionError) as exc:
             warnings.append(f"target {t.name!r} could not be restored: {exc}")
     if edit is not None and edit.acquisition is not None:
@@ -216,7 +219,7 @@ def document_edit(document: Document, *, photograph: str | None = None) -> Edit:
     acq = document.acquisition
     return Edit(
         targets=tuple(EditTarget(t.name, mask_name(t.name, mask_digest(t.acquired_mask())),
-                                 tuple(float(k) for k in t.kappa), tuple(int(c) for c in t.colour))
+                                 tuple(float(k) for k in t.kappa), tuple(int(c) for c in t.colour), t.included)
                       for t in document.targets),
         acquisition=None if acq is None else EditAcquisition(
             tuple(document.target(u).name for u in acq.cascade),

@@ -178,6 +178,7 @@ class RigControl(QObject):
             elif load_calibration(mine).to_dict()[0] != calibration.to_dict()[0]:
                 self.calibration = calibration  # taken into the new session folder of the next acquisition
         self.follow_document()
+        self._remember_session()
         self.w.statusBar().showMessage(f"Calibrated into {session.path}", 10000)
         self.w._update_actions()
 
@@ -206,6 +207,7 @@ class RigControl(QObject):
         self.panel = AcquisitionPanel(self.rig, self.w.session, parent=self.w, synchronous=self.w.synchronous)
         self.panel.branch = self._branch
         self.panel.acquired.connect(self._on_acquired)
+        self.panel.started.connect(lambda _job: self._remember_session())
         self.panel.busy_changed.connect(lambda busy: self.w._set_busy(busy))
         self.dock = QDockWidget("Acquisition", self.w, objectName="acquisition")
         area = scrolling(self.panel, "acquisition_scroll")
@@ -230,7 +232,21 @@ class RigControl(QObject):
                 doc.events.kappa.connect(self._on_kappa)
                 doc.events.mask.connect(self._on_mask)
             self._watched = doc
+        self._attach_truth()
         self._on_document_changed()
+
+    def _attach_truth(self) -> None:
+        """A reopened session of the open simulated rig gets its scene's ground truth back (the Ground Truth
+        and Error views), when the scene reproduces its photograph (:func:`app.model.scene_truth.scene_truth`)."""
+        from app.model.scene_truth import scene_truth
+
+        doc, rig = self.w.doc, self.rig
+        if doc is None or doc.truth is not None or getattr(rig, "truth", None) is None:
+            return
+        doc.truth, _why = scene_truth(rig, self.w.session, doc.photograph)
+        if doc.truth is not None:
+            self.w.preview.rebuild()
+            self.w._update_actions()
 
     def _on_kappa(self, uid: int, _kappa) -> None:
         """Only the fixed κ of earlier cascade targets matter to the dock (not a slider drag on the last)."""
@@ -293,6 +309,12 @@ class RigControl(QObject):
         self.w.session, self.w.demo = new, False
         self.w._update_title()
         return new
+
+    def _remember_session(self) -> None:
+        """The window's session folder (made by the wizard or for an acquisition) goes to File ▸ Open Recent:
+        an acquisition left unfinished there is found again. Not the demo's (it lives in the cache)."""
+        if self.w.session is not None and not self.w.demo:
+            self.w.files.add_recent(self.w.session.path)
 
     def _on_acquired(self, result) -> None:
         """A finished cascade becomes the document's acquisition; the last target stays free."""

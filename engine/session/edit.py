@@ -5,7 +5,7 @@ One schema, owned by the engine and used by the app, ``albedit recolor``, ``expo
 
     {"version": 2,
      "targets": [{"name": "target 1", "mask": "target_1-3f2a9c1b", "kappa": [r, g, b],
-                  "colour": [r, g, b]}, ...],
+                  "colour": [r, g, b], "included": false}, ...],
      "current": "target 1",
      "photograph": "acq-photograph",
      "acquisition": {"cascade": ["floor", "target 1"], "kappas": [[...], [...]],
@@ -14,7 +14,8 @@ One schema, owned by the engine and used by the app, ``albedit recolor``, ``expo
 Target names are display names: any text a user can type (``"target 1"``, ``"Wand — links"``).
 Their masks are stored under a safe file name derived from the name and the mask's content
 (:func:`mask_name`), so every name is accepted everywhere and a save that rewrites a mask
-never touches the file an older save still refers to. The cascade lists acquired targets
+never touches the file an older save still refers to. ``included`` is written only for a
+target left out of the next acquisition (``false``; absent reads as ``true``). The cascade lists acquired targets
 first to last; the last one's κ is free, the others' were fixed before capture (Sec. 4), and
 ``kappas`` records every cascade target's κ at acquisition. ``noise_aware`` chooses the
 recolor: the noise-aware one (:mod:`engine.trust`, the default of every new acquisition) or
@@ -65,7 +66,7 @@ _CACHE_KEY = Str(pattern=NAME.pattern, expected="a cache key")
 _EDIT_FIELDS = Obj(required={
     "version": Int(EDIT_VERSION, EDIT_VERSION),
     "targets": List(Obj(required={"name": _TARGET_NAME, "mask": _MASK_NAME, "kappa": _KAPPA},
-                        optional={"colour": _COLOUR})),
+                        optional={"colour": _COLOUR, "included": Bool()})),
     "current": Nullable(_TARGET_NAME),
     "photograph": Nullable(_MASK_NAME),
     "acquisition": Nullable(Obj(required={
@@ -184,12 +185,15 @@ class EditTarget:
         Albedo scale per channel.
     colour : (3,) tuple of int or None
         Overlay colour in the app.
+    included : bool
+        Whether the next acquisition measures it (False: painted for reference, left out).
     """
 
     name: str
     mask: str
     kappa: tuple[float, float, float] = (1.0, 1.0, 1.0)
     colour: tuple[int, int, int] | None = None
+    included: bool = True
 
 
 @dataclass(frozen=True)
@@ -267,7 +271,8 @@ class Edit:
             "version": EDIT_VERSION,
             "targets": [
                 {"name": t.name, "mask": t.mask, "kappa": [float(k) for k in t.kappa],
-                 **({} if t.colour is None else {"colour": [int(c) for c in t.colour]})}
+                 **({} if t.colour is None else {"colour": [int(c) for c in t.colour]}),
+                 **({} if t.included else {"included": False})}
                 for t in self.targets
             ],
             "current": self.current,
@@ -300,7 +305,8 @@ class Edit:
         acq = data["acquisition"]
         return cls(
             targets=tuple(EditTarget(t["name"], t["mask"], tuple(t["kappa"]),
-                                     None if "colour" not in t else tuple(t["colour"])) for t in data["targets"]),
+                                     None if "colour" not in t else tuple(t["colour"]), bool(t.get("included", True)))
+                          for t in data["targets"]),
             acquisition=None if acq is None else EditAcquisition(
                 tuple(acq["cascade"]), tuple(tuple(k) for k in acq["kappas"]), acq["decomposition"], acq["denoise"],
                 bool(acq.get("noise_aware", False))),

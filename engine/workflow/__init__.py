@@ -62,14 +62,15 @@ from engine.workflow.decomposition import (
     noise_reduced,
     photograph_name,
 )
-from engine.workflow.edit import edit_from_plan, save_edit, saved_edit
+from engine.workflow.edit import edit_from_plan, interrupted_edit, save_edit, saved_edit
 from engine.workflow.trusted import NoNoiseModel, load_trusted, trusted_key
 
 __all__ = [
     "MAX_FRAMES", "RELATIVE", "CaptureResult", "NoNoiseModel", "Preflight", "Unreachable", "adopt_calibration",
     "cached_decomposition",
     "calibration_problems", "capture_plan", "check_frames", "check_rig", "check_targets", "decomposition_key",
-    "denoised_key", "edit_from_plan", "estimated_report", "load_calibration", "load_compatible_calibration",
+    "denoised_key", "edit_from_plan", "estimated_report", "interrupted_edit", "load_calibration",
+    "load_compatible_calibration",
     "load_decomposition", "load_trusted", "noise_reduced", "open_session_for_rig", "photograph_name", "preflight",
     "rig_metadata", "run_calibration", "run_capture", "run_checker", "save_calibration", "save_edit", "saved_checker",
     "saved_edit",

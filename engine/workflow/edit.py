@@ -8,7 +8,7 @@ from engine.session import Session
 from engine.session.edit import Edit, EditAcquisition, EditTarget, mask_name
 from engine.workflow.decomposition import decomposition_key
 
-__all__ = ["edit_from_plan", "save_edit", "saved_edit"]
+__all__ = ["edit_from_plan", "interrupted_edit", "save_edit", "saved_edit"]
 
 
 def saved_edit(session: Session) -> Edit | None:
@@ -53,16 +53,36 @@ def edit_from_plan(session: Session, kappa=(1.0, 1.0, 1.0), *, denoise: int = 0,
     plan = session.state.get("plan")
     if plan is None:
         raise SessionError(f"session {session.path} has no acquisition: run `albedit capture` first")
+    targets = _plan_targets(session, plan, kappa)
+    cascade = tuple(plan["targets"])
+    return Edit(targets=targets, current=cascade[-1],
+                acquisition=EditAcquisition(cascade, tuple(t.kappa for t in targets), decomposition_key(session),
+                                            int(denoise), bool(noise_aware)))
+
+
+def interrupted_edit(session: Session) -> Edit | None:
+    """The edit of an acquisition that did not finish and was never saved: its plan's targets (κ as
+    planned, the last one's 1) and nothing acquired, so the same plan can be resumed.
+
+    None when the session holds a saved edit, no plan, or a finished one (:func:`saved_edit` reads those).
+    """
+    state = session.state
+    plan = state.get("plan")
+    if plan is None or state.get("status") == "captured" or saved_edit(session) is not None:
+        return None
+    targets = _plan_targets(session, plan, (1.0, 1.0, 1.0))
+    return Edit(targets=targets, current=targets[-1].name)
+
+
+def _plan_targets(session: Session, plan: dict, kappa) -> tuple[EditTarget, ...]:
+    """The plan's targets in cascade order, with their fixed κ and the last one's ``kappa``."""
     masks = set(session.masks)
     kappas = [tuple(k) for k in plan["fixed_kappa"]] + [tuple(float(v) for v in check_kappa(kappa, 3))]
     targets = []
     for name, digest, kap in zip(plan["targets"], plan["masks"], kappas, strict=True):
         stored = mask_name(name, digest)
         targets.append(EditTarget(name, stored if stored in masks or name not in masks else name, kap))
-    cascade = tuple(plan["targets"])
-    return Edit(targets=tuple(targets), current=cascade[-1],
-                acquisition=EditAcquisition(cascade, tuple(kappas), decomposition_key(session), int(denoise),
-                                            bool(noise_aware)))
+    return tuple(targets)
 
 
 def save_edit(session: Session, edit: Edit) -> None:

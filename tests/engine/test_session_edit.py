@@ -19,7 +19,7 @@ from engine.session.edit import (
     mask_digest,
     mask_name,
 )
-from engine.workflow import edit_from_plan, save_edit, saved_edit
+from engine.workflow import edit_from_plan, interrupted_edit, save_edit, saved_edit
 
 CAMERA = (6, 8)
 
@@ -136,6 +136,29 @@ def test_the_command_lines_old_edit_is_completed_from_the_plan(tmp_path):
     assert edit_from_plan(session, 3.0, denoise=2).acquisition.denoise == 2
     with pytest.raises(SessionError, match="has no acquisition"):
         edit_from_plan(_session(tmp_path / "t"))
+
+
+def test_a_target_left_out_of_the_acquisition_stays_left_out(tmp_path):
+    session = _session(tmp_path / "s")
+    edit = Edit(targets=(EditTarget("lamp", "lamp-00000000", included=False), EditTarget("wall", "wall-11111111")))
+    save_edit(session, edit)
+    stored = session.state["edit"]["targets"]
+    assert stored[0]["included"] is False and "included" not in stored[1]  # absent reads as included
+    assert [t.included for t in saved_edit(Session.open(tmp_path / "s")).targets] == [False, True]
+
+
+def test_an_unfinished_unsaved_acquisition_opens_as_its_plans_targets(tmp_path):
+    session = _session(tmp_path / "s")
+    assert interrupted_edit(session) is None  # no plan
+    _captured_plan(session)
+    assert interrupted_edit(session) is None  # finished: saved_edit derives the acquisition
+    session.update(status="capturing")
+    assert saved_edit(session) is None
+    edit = interrupted_edit(session)
+    assert [(t.name, t.kappa) for t in edit.targets] == [("floor", (0.5, 0.5, 0.5)), ("right_wall", (1.0, 1.0, 1.0))]
+    assert edit.acquisition is None and edit.current == "right_wall"
+    save_edit(session, Edit(targets=edit.targets[:1]))
+    assert interrupted_edit(session) is None  # the user's saved edit wins
 
 
 def test_export_metadata_is_the_edit_as_files_carry_it():
