@@ -29,7 +29,18 @@ from engine.edge import check_coverage, refine_mask
 from engine.errors import InputError
 from engine.workflow import check_targets
 
-__all__ = ["BBox", "Document", "KAPPA_MAX", "KAPPA_MIN", "Measurement", "PALETTE", "Target"]
+__all__ = ["BBox", "Document", "camera_mismatch", "KAPPA_MAX", "KAPPA_MIN", "Measurement", "PALETTE", "Target"]
+
+def camera_mismatch(photograph_shape, camera_resolution) -> str:
+    """Why a camera of ``camera_resolution`` (H, W) cannot measure targets painted on a photograph of
+    ``photograph_shape`` (H, W), in words (``"the open photograph is 32×24, the camera 32×32"``), or ``""``.
+
+    Targets are painted on the photograph's pixels: only a camera of its size can acquire them, and a
+    session of another size cannot hold its edit.
+    """
+    (h, w), (ch, cw) = (int(v) for v in photograph_shape[:2]), (int(v) for v in camera_resolution[:2])
+    return "" if (h, w) == (ch, cw) else f"the open photograph is {w}×{h}, the camera {cw}×{ch}"
+
 
 class Document:
     """Everything the user edits, Qt-free.
@@ -146,6 +157,11 @@ class Document:
             if n:
                 out[t.name] = n
         return out
+
+    def camera_mismatch(self, camera_resolution) -> str:
+        """Why a camera of ``camera_resolution`` cannot measure this photograph's targets, or ``""``
+        (:func:`camera_mismatch`)."""
+        return camera_mismatch(self.shape, camera_resolution)
 
     def check_acquirable(self, uids=None) -> None:
         """Raise InputError if the targets cannot be acquired (empty, or unreachable pixels).

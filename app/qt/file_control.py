@@ -94,7 +94,9 @@ class FileControl(QObject):
 
     def _save_into(self, session, new_path: Path | None) -> bool:
         doc, source = self.w.doc, self.w.session
-        projector = None if self.w.rig is None else tuple(self.w.rig.projector.resolution)
+        rig = self.w.rig  # a new session folder is set up for the open rig, unless its camera cannot take the photograph
+        projector = None if rig is None or doc.camera_mismatch(rig.camera.resolution) else \
+            tuple(rig.projector.resolution)
 
         def work(progress=None, should_stop=None):
             if new_path is None:

@@ -155,7 +155,7 @@ class RigControl(QObject):
         if name is None and self.last is not None:
             name = self.last[0]
         wizard = CalibrationWizard(self.w, rig=self.rig, keep_rig=self.rig is None, rig_name=name,
-                                   resolution=None if doc is None else doc.shape, settings=self.w.settings,
+                                   photograph=None if doc is None else doc.shape, settings=self.w.settings,
                                    synchronous=self.w.synchronous)
         wizard.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
         wizard.finished_session.connect(lambda s: self._on_calibrated(wizard, s))
@@ -163,13 +163,20 @@ class RigControl(QObject):
 
     def _on_calibrated(self, wizard, session) -> None:
         """The document uses the new calibration: its session adopts it when it has none; a session
-        calibrated otherwise is left as it is, and the next acquisition goes to a new session folder."""
+        calibrated otherwise is left as it is, and the next acquisition goes to a new session folder.
+        A calibration of a camera of another size than the photograph is not used for it at all."""
         from engine.workflow import adopt_calibration, load_calibration
 
         if self.rig is None and wizard.rig is not None:
             self.adopt(wizard.take_rig(), wizard.rig_spec()[1])
         calibration = wizard.calibration
-        mine = self.w.session
+        mine, doc = self.w.session, self.w.doc
+        size = "" if doc is None else doc.camera_mismatch(session.camera_resolution)
+        if size:
+            self.w.statusBar().showMessage(f"Calibrated into {session.path}; not used for the open photograph "
+                                           f"({size})", 15000)
+            self.w._update_actions()
+            return
         if mine is None:
             self.w.session = session
         elif Path(mine.path).resolve() != Path(session.path).resolve():
@@ -191,7 +198,11 @@ class RigControl(QObject):
         if self.rig is None and self.last is not None:
             self.reopen_rig(then=self.acquire)
             return
+        size = "" if self.rig is None else doc.camera_mismatch(self.rig.camera.resolution)
         try:
+            if size:
+                raise InputError(f"{size}: calibrate a camera of the photograph's size (Rig ▸ Calibrate Rig…), "
+                                 "or open a photograph this camera took")
             doc.check_acquirable()
         except InputError as exc:
             self.w.show_error("Cannot acquire", exc)

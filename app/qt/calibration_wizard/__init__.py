@@ -33,6 +33,7 @@ from PySide6.QtWidgets import QAbstractSpinBox, QLineEdit, QWidget, QWizard
 
 import devices
 from app.model.demo import DEMO_RIG
+from app.model.document import camera_mismatch
 from app.qt.calibration_wizard.calibration_pages import (
     PAGE_CALIBRATE,
     PAGE_EXPOSURE,
@@ -87,8 +88,10 @@ class CalibrationWizard(QWizard):
         Preselect this rig on the first page (default: the last one chosen, else the demo's).
     rig_options : dict, optional
         Extra :func:`devices.open_rig` options for virtual rigs (``cache_dir``, ``seed``).
-    resolution : (H, W), optional
-        The virtual rig's camera resolution to propose (the open document's).
+    photograph : (H, W), optional
+        The open document's size: proposed as a simulated camera's resolution, and a camera of
+        another size is warned about on the way and in the summary (its calibration cannot be
+        used for the photograph's targets).
     session_path : str or Path, optional
         Session folder to propose (default: a new dated folder under ``sessions_dir``).
     sessions_dir : str or Path, optional
@@ -133,7 +136,7 @@ class CalibrationWizard(QWizard):
     PREFERRED_SIZE = (820, 640)
 
     def __init__(self, parent: QWidget | None = None, *, rig=None, rig_name: str | None = None,
-                 rig_options: dict | None = None, resolution=None, session_path=None, sessions_dir=None,
+                 rig_options: dict | None = None, photograph=None, session_path=None, sessions_dir=None,
                  settings: QSettings | None = None, keep_rig: bool = False, synchronous: bool = False,
                  live_interval_ms: int = 200):
         super().__init__(parent)
@@ -147,6 +150,7 @@ class CalibrationWizard(QWizard):
         self.live_interval_ms = int(live_interval_ms)
         self.keep_rig = bool(keep_rig)
         self.given_rig = rig
+        self.photograph = None if photograph is None else (int(photograph[0]), int(photograph[1]))
         self.initial_rig_name = rig_name or self._remembered("rig") or DEMO_RIG
         self.rig_options = dict(rig_options or {})
         folder = sessions_dir or self._remembered("sessions_dir")
@@ -172,7 +176,7 @@ class CalibrationWizard(QWizard):
         for pid, page in zip(range(6), (self.rig_page, self.projector_page, self.exposure_page,
                                         self.calibration_page, self.results_page, self.summary_page), strict=True):
             self.setPage(pid, page)
-        self._restore_choices(resolution)
+        self._restore_choices()
         if session_path is not None:
             self.rig_page.session_path.setText(str(session_path))
         for button, name in self.BUTTON_NAMES.items():
@@ -191,12 +195,11 @@ class CalibrationWizard(QWizard):
     def _remembered(self, key: str, default=None):
         return default if self.settings is None else self.settings.value(f"{SETTINGS}/{key}", default)
 
-    def _restore_choices(self, resolution) -> None:
+    def _restore_choices(self) -> None:
         page = self.rig_page
         page.ideal.setChecked(str(self._remembered("ideal", "true")).lower() == "true")
         page.pose.setCurrentText(str(self._remembered("pose", "coaxial")))
-        h, w = resolution if resolution is not None else (int(self._remembered("res_h", 128)),
-                                                         int(self._remembered("res_w", 128)))
+        h, w = self.photograph or (int(self._remembered("res_h", 128)), int(self._remembered("res_w", 128)))
         page.res_h.setValue(int(h))
         page.res_w.setValue(int(w))
         self.calibration_page.levels.setValue(int(self._remembered("levels", 17)))
@@ -289,7 +292,9 @@ class CalibrationWizard(QWizard):
             self.session = None
             page.status.setText(red(error_text(exc)) + "<br>" + esc(fix_for(exc)))
             return False
-        page.status.setText(f"Opened {esc(self.rig.name)}; session {esc(str(self.session.path))}.")
+        size = self.mismatch(self.rig.camera.resolution)
+        page.status.setText(f"Opened {esc(self.rig.name)}; session {esc(str(self.session.path))}."
+                            + (f"<br>{red(size + ': this calibration cannot be used for it.')}" if size else ""))
         return True
 
     def _run(self, job: Job) -> None:
@@ -356,10 +361,23 @@ class CalibrationWizard(QWizard):
         self.calibrated.emit(calibration)
         return True, f"Using the calibration of {path} ({calibration.metadata.get('coverage', '')})."
 
+    def mismatch(self, camera_resolution) -> str:
+        """Why a camera of ``camera_resolution`` cannot acquire the open photograph's targets, as a
+        sentence; ``""`` when it can, or when no photograph is open."""
+        if self.photograph is None:
+            return ""
+        why = camera_mismatch(self.photograph, camera_resolution)
+        return why and f"{why[:1].upper()}{why[1:]}"
+
     # -- summary -------------------------------------------------------------------------
     def problems(self) -> list[tuple[str, str]]:
         """(what, how to fix) pairs for the summary page."""
         out = []
+        size = "" if self.rig is None else self.mismatch(self.rig.camera.resolution)
+        if size:
+            out.append((size, "The calibration stays in its session folder for photographs this camera takes; the "
+                              "open photograph keeps none. To acquire its targets, calibrate a camera of its size "
+                              "(a simulated rig: its resolution on the first page)."))
         if self.failure is not None:
             out.append((error_text(self.failure), fix_for(self.failure)))
         if self.calibration is not None:

@@ -48,6 +48,9 @@ class RigPage(QWizardPage):
         self.rig_name.setPlaceholderText("backend:argument, e.g. virtual:cornell or opencv:0")
         self.given = QLabel(objectName="wizard_given_rig")
         self.given.setWordWrap(True)
+        self.size_note = QLabel(objectName="wizard_size_note")  # a camera of another size than the photograph
+        self.size_note.setWordWrap(True)
+        self.size_note.hide()
 
         self.virtual = QGroupBox("Virtual rig", objectName="wizard_virtual")
         self.ideal = QCheckBox("ideal (no noise, linear projector)", objectName="wizard_ideal")
@@ -84,6 +87,7 @@ class RigPage(QWizardPage):
         name_row.addWidget(self.rig_name, 1)
         lay.addLayout(name_row)
         lay.addWidget(self.virtual)
+        lay.addWidget(self.size_note)
         lay.addWidget(QLabel("Session folder"))
         lay.addLayout(row)
         lay.addWidget(note)
@@ -92,6 +96,8 @@ class RigPage(QWizardPage):
         self.rigs.currentItemChanged.connect(self._on_pick)
         self.rig_name.textChanged.connect(self._on_name_changed)
         self.session_path.textChanged.connect(self.completeChanged)
+        for spin in (self.res_h, self.res_w):
+            spin.valueChanged.connect(self._update_size_note)
         self._fill()
 
     def _fill(self) -> None:
@@ -137,7 +143,23 @@ class RigPage(QWizardPage):
 
     def _on_name_changed(self, text: str) -> None:
         self.virtual.setEnabled(text.startswith(SIMULATED))
+        self._update_size_note()
         self.completeChanged.emit()
+
+    def _update_size_note(self, *_args) -> None:
+        """Warn while the camera chosen (an open rig's, or a simulated one's resolution) is not the open
+        photograph's size; other cameras are checked once open (the projector page)."""
+        w = self.w
+        if w.given_rig is not None:
+            camera = w.given_rig.camera.resolution
+        elif self.rig_name.text().startswith(SIMULATED):
+            camera = (self.res_h.value(), self.res_w.value())
+        else:
+            camera = None
+        why = "" if camera is None else w.mismatch(camera)
+        self.size_note.setText(red(f"{why}: its calibration cannot be used for the photograph's targets (a "
+                                   "camera of the photograph's size can).") if why else "")
+        self.size_note.setVisible(bool(why))
 
     def _on_browse(self) -> None:
         path = QFileDialog.getExistingDirectory(self, "Session folder", self.session_path.text())

@@ -369,7 +369,7 @@ def test_the_main_window_wizard_starts_from_the_document_and_remembers(make_wind
     user.trigger("calibrate")
     w = window.findChild(QWizard, "calibration_wizard")
     assert w.rig_page.res_w.value() == RES + 8  # the document's resolution again
-    w.rig_page.res_w.setValue(RES)
+    assert w.rig_page.size_note.text() == ""  # the photograph's own size: nothing to warn about
     _to_calibration_page(w, qtbot)
     with qtbot.waitSignal(w.calibrated, timeout=TIMEOUT_MS):
         w.calibration_page.start.click()
@@ -378,15 +378,15 @@ def test_the_main_window_wizard_starts_from_the_document_and_remembers(make_wind
     w.next()
     w.button(QWizard.WizardButton.FinishButton).click()
     qtbot.waitUntil(lambda: window.findChild(QWizard, "calibration_wizard") is None)
-    assert window.rig is not None and window.rig.camera.resolution == (RES, RES)  # kept open for acquiring
+    assert window.rig is not None and window.rig.camera.resolution == (RES, RES + 8)  # kept open for acquiring
     assert window.session is not None and load_calibration(window.session) is not None
     assert window.act_close_rig.isEnabled() and window.act_acquire.isEnabled()
-    assert window.settings.value("wizard/res_w") in (RES, str(RES))  # remembered
+    assert window.settings.value("wizard/res_w") in (RES + 8, str(RES + 8))  # remembered
 
     user.trigger("calibrate")  # now the open rig: named in words, no Python repr
     w = window.findChild(QWizard, "calibration_wizard")
-    assert w.rig_page.given.text() == (f"Using the rig that is open: virtual:cornell — camera {RES}×{RES}, "
-                                       f"projector {RES}×{RES}.")
+    assert w.rig_page.given.text() == (f"Using the rig that is open: virtual:cornell — camera {RES + 8}×{RES}, "
+                                       f"projector {RES + 8}×{RES}.")
     assert w.rig_page.rigs.isHidden() and w.rig_page.rigs_label.isHidden()
     w.reject()
     assert window.rig is not None  # the wizard never closes a rig it was given
