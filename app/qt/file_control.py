@@ -94,7 +94,7 @@ class FileControl(QObject):
 
     def _save_into(self, session, new_path: Path | None) -> bool:
         doc, source = self.w.doc, self.w.session
-        rig = self.w.rig  # a new session folder is set up for the open rig, unless its camera cannot take the photograph
+        rig = self.w.rig  # a new folder is set up for the open rig, unless its camera cannot take the photo
         projector = None if rig is None or doc.camera_mismatch(rig.camera.resolution) else \
             tuple(rig.projector.resolution)
 
