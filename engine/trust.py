@@ -596,11 +596,60 @@ def bright_pixels(photograph, target) -> np.ndarray:
     >>> bright_pixels(photo, np.array([[True, False, False, False]])).tolist()
     [[False, False, False, True]]
     """
+    outside = ~np.asarray(target, bool)
+    return _brighter(photograph, outside, outside)
+
+
+def _brighter(photograph, candidates: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """(H, W) bool: ``candidates`` brighter (mean over channels) than :data:`BRIGHT` times the median lit
+    pixel of ``reference`` (none when ``reference`` has no lit pixel)."""
     level = np.asarray(photograph, np.float64).mean(axis=-1)
-    lit = ~np.asarray(target, bool) & (level > 0)
+    lit = reference & (level > 0)
     if not lit.any():
-        return lit
-    return lit & (level > BRIGHT * float(np.median(level[lit])))
+        return np.zeros(level.shape, bool)
+    return candidates & (level > 0) & (level > BRIGHT * float(np.median(level[lit])))
+
+
+def lamp_caution(name: str, photograph, mask) -> str:
+    """A warning when the target painted as ``mask`` holds a light source, or ``""``.
+
+    A lamp's light is its own emission: scaling its albedo by κ leaves that light as it is, but the
+    method counts everything leaving a target pixel as reflected (the photograph is the first
+    interaction component's sum) and would scale the lamp's light by κ, on the lamp and on every
+    surface it lights. Target pixels (any coverage) brighter than :data:`BRIGHT` times the median lit
+    pixel outside the target — what :func:`bright_pixels` calls a lamp or a highlight — are counted;
+    the caution is given from 4 pixels or 1 % of the target on.
+
+    Parameters
+    ----------
+    name : str
+        The target's display name.
+    photograph : (H, W, 3) float
+        Linear radiance.
+    mask : (H, W) bool or float coverage
+
+    Returns
+    -------
+    str
+        One line naming the target and how many of its pixels are that bright.
+
+    Examples
+    --------
+    >>> photo = np.ones((8, 8, 3), np.float32); photo[:2, :3] = 50
+    >>> lamp = np.zeros((8, 8), bool); lamp[:3, :3] = True
+    >>> lamp_caution("shade", photo, lamp)[:48]
+    "6 of 9 pixels of 'shade' are over 8× the scene's"
+    >>> lamp_caution("wall", photo, ~lamp)
+    ''
+    """
+    painted = np.asarray(mask) > 0
+    bright = _brighter(photograph, painted, ~painted)
+    n, total = int(bright.sum()), int(painted.sum())
+    if n < max(4, 0.01 * total):
+        return ""
+    return (f"{n} of {total} pixels of {name!r} are over {BRIGHT:g}× the scene's median brightness: a light source "
+            "or a highlight, whose own light κ would scale (a lamp's light does not change with its albedo); "
+            "erase them from the target")
 
 
 def _apart(photograph: np.ndarray, target: np.ndarray, lamps: bool) -> np.ndarray:

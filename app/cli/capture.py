@@ -15,12 +15,14 @@ from engine.imageio import read_mask
 from engine.noise import packed_index
 from engine.session import Session
 from engine.session.paths import MANIFEST
+from engine.trust import lamp_caution
 from engine.workflow import (
     adopt_calibration,
     check_targets,
     estimated_report,
     load_compatible_calibration,
     open_session_for_rig,
+    photograph_name,
     run_capture,
 )
 
@@ -114,4 +116,8 @@ def run(args) -> int:
               file=sys.stderr)
     if line := estimated_report(session):
         print(line, file=sys.stderr)
+    photograph = session.read_capture(photograph_name(session, None))
+    for name, mask in targets:
+        if line := lamp_caution(name, photograph, mask):
+            print(f"warning: {line}", file=sys.stderr)
     return 0

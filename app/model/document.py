@@ -27,6 +27,7 @@ from app.model.target import KAPPA_MAX, KAPPA_MIN, PALETTE, BBox, DocumentEvents
 from engine.checks import check_float_image, check_kappa, check_mask
 from engine.edge import check_coverage, refine_mask
 from engine.errors import InputError
+from engine.trust import lamp_caution
 from engine.workflow import check_targets
 
 __all__ = ["BBox", "Document", "camera_mismatch", "KAPPA_MAX", "KAPPA_MIN", "Measurement", "PALETTE", "Target"]
@@ -162,6 +163,13 @@ class Document:
         """Why a camera of ``camera_resolution`` cannot measure this photograph's targets, or ``""``
         (:func:`camera_mismatch`)."""
         return camera_mismatch(self.shape, camera_resolution)
+
+    def lamp_cautions(self, uids=None) -> list[str]:
+        """A line per target (default the included ones) that holds a light source
+        (:func:`engine.trust.lamp_caution`): κ would scale the lamp's own light."""
+        uids = [t.uid for t in self.acquisition_targets()] if uids is None else list(uids)
+        found = (lamp_caution(self.target(u).name, self.photograph, self.target(u).acquired_mask()) for u in uids)
+        return [line for line in found if line]
 
     def check_acquirable(self, uids=None) -> None:
         """Raise InputError if the targets cannot be acquired (empty, or unreachable pixels).

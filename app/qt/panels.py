@@ -129,6 +129,13 @@ class TargetPanel(QWidget):
         layout.addWidget(self.list)
         layout.addLayout(buttons)
         layout.addWidget(self.coverage)
+        self.caution = QLabel(objectName="target_caution")  # a lamp painted into the selected target
+        self.caution.setWordWrap(True)
+        self.caution.setStyleSheet("color: #c0392b")
+        self.caution.hide()
+        layout.addWidget(self.caution)
+        self._caution_timer = QTimer(self, singleShot=True, interval=150)  # after the stroke, not at every dab
+        self._caution_timer.timeout.connect(self._show_caution)
         self.add_button.clicked.connect(lambda: self._guard(self.doc.add_target))
         self.remove_button.clicked.connect(self._remove)
         self.up_button.clicked.connect(lambda: self._move(-1))
@@ -175,10 +182,18 @@ class TargetPanel(QWidget):
     def _show_coverage(self) -> None:
         """The selected target's coverage: pixels wholly on it, and edge pixels partly on it."""
         uid = self.doc.current
+        self._caution_timer.start()
         if uid == -1:
             self.coverage.setText("")
             return
         self.coverage.setText(coverage_text(self.doc.target(uid)))
+
+    def _show_caution(self) -> None:
+        """Whether the selected target holds a lamp or a highlight (its own light, which κ cannot recolor)."""
+        uid = self.doc.current
+        lines = [] if uid == -1 else self.doc.lamp_cautions([uid])
+        self.caution.setText(lines[0] if lines else "")
+        self.caution.setVisible(bool(lines))
 
     def _uid(self, item) -> int:
         return -1 if item is None else int(item.data(Qt.ItemDataRole.UserRole))

@@ -207,6 +207,12 @@ class RigControl(QObject):
         except InputError as exc:
             self.w.show_error("Cannot acquire", exc)
             return
+        cautions = doc.lamp_cautions()
+        if cautions and QMessageBox.question(
+                self.w, "Acquire a light source?", "\n".join(c[:1].upper() + c[1:] + "." for c in cautions)
+                + "\n\nAcquire anyway?") != QMessageBox.StandardButton.Yes:
+            self.w.statusBar().showMessage("Not acquired: " + cautions[0], 15000)
+            return
         self._ensure_dock()
         self.follow_document()
         self.dock.show()

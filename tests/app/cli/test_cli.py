@@ -304,3 +304,23 @@ def test_calibration_reports_each_finding_once_and_judges_exposure_on_projector_
     assert result.returncode == 0, result.stderr
     assert result.stderr.count("camera pixels") == 1 and "problem: " in result.stderr  # the void: undecoded
     assert re.search(r"^ok: 0.0% of \d+ projector-lit pixels saturated", result.stderr, re.M), result.stderr
+
+
+def test_capture_warns_when_a_target_holds_a_light_source(tmp_path):
+    """The lamp painted as a target: κ would scale its own light; capture says so (and still captures)."""
+    import devices
+    from engine.imageio import write_image
+
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(24, 24)) as rig:
+        lamp = rig.truth.emitters()
+    write_image(tmp_path / "lamp.png", np.repeat(lamp[..., None], 3, axis=-1).astype(np.float32))
+    assert _run("calibrate", str(tmp_path / "s"), "--ideal", "--resolution", "24", "--levels", "3").returncode == 0
+    result = _run("capture", str(tmp_path / "s"), "--target", f"lamp={tmp_path / 'lamp.png'}", "--order", "1")
+    assert result.returncode == 0, result.stderr
+    warning = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
+    assert warning == [f"warning: {lamp.sum()} of {lamp.sum()} pixels of 'lamp' are over 8× the scene's median "
+                       "brightness: a light source or a highlight, whose own light κ would scale (a lamp's light "
+                       "does not change with its albedo); erase them from the target"]
+    wall = _run("capture", str(tmp_path / "w"), "--calibration", str(tmp_path / "s"), "--target", "right_wall",
+                "--order", "1")
+    assert wall.returncode == 0 and "warning:" not in wall.stderr
