@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QEvent, QObject, Qt
 from PySide6.QtGui import QGuiApplication
-from PySide6.QtWidgets import QScrollArea, QWidget
+from PySide6.QtWidgets import QAbstractSpinBox, QApplication, QComboBox, QScrollArea, QWidget
 
 #: Room the window manager takes around a window (title bar and bottom border; side borders), logical pixels.
 FRAME = 40
@@ -30,6 +30,25 @@ def scrolling(widget: QWidget, name: str) -> QScrollArea:
     area.setFrameShape(QScrollArea.Shape.NoFrame)
     area.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
     area.setWidget(widget)
+    guard = _WheelScrolls(area)
+    for control in (*widget.findChildren(QComboBox), *widget.findChildren(QAbstractSpinBox)):
+        control.setFocusPolicy(Qt.FocusPolicy.StrongFocus)  # a wheel passing over does not focus it
+        control.installEventFilter(guard)
     # wide enough for the controls and the vertical scroll bar (without it, the bar covered their right edge)
     area.setMinimumWidth(widget.minimumSizeHint().width() + area.verticalScrollBar().sizeHint().width())
     return area
+
+
+class _WheelScrolls(QObject):
+    """The wheel over a combo box or spin box of a scrolling dock scrolls the dock, unless the control has the
+    focus (clicked first): scrolling past the acquisition dock's controls changed its policy and its order."""
+
+    def __init__(self, area: QScrollArea):
+        super().__init__(area)
+        self.area = area
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 (Qt name)
+        if event.type() == QEvent.Type.Wheel and not obj.hasFocus():
+            QApplication.sendEvent(self.area.verticalScrollBar(), event)
+            return True
+        return False

@@ -205,6 +205,7 @@ class MainWindow(QMainWindow):
         self.colour_panel.reference_requested.connect(self.open_reference)
         self.exposure_spin.valueChanged.connect(self.colour_panel.refresh)
         self.albedo_panel = AlbedoPanel(document, colour=self.colour_panel)
+        self.albedo_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         # "Link channels" is how the user likes to drag κ, not part of the edit: remembered across documents
         self.albedo_panel.link.setChecked(self._flag(LINK_SETTING))
         self.albedo_panel.link.toggled.connect(lambda on: self.settings.setValue(LINK_SETTING, bool(on)))
@@ -671,7 +672,14 @@ class MainWindow(QMainWindow):
         self.files.export(path, dtype=dtype, clip=clip)
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt override
-        if self.job is not None:
+        if self.rigs.acquiring() and QMessageBox.question(
+                self, APP_NAME, "An acquisition is running. Quit and stop it?\n\nThe captures taken so far stay in "
+                f"{self.session.path}: open it again (File ▸ Open Recent) and Rig ▸ Acquire… resumes it.",
+                QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No,
+                QMessageBox.StandardButton.No) != QMessageBox.StandardButton.Yes:
+            event.ignore()
+            return
+        if self.job is not None:  # background work (opening, preparing, noise reduction): recomputed next time
             self.job.wait(10.0, cancel=True)
         if not self.files.maybe_save():
             event.ignore()

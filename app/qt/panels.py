@@ -39,6 +39,9 @@ from engine.errors import InputError
 
 #: Slider ticks per doubling of κ (the slider is logarithmic).
 TICKS_PER_STOP = 100
+#: The κ boxes take values up to this, so one typed beyond a target's range reaches the panel and is
+#: answered with the range (a spin box's own maximum silently drops the keystroke: "40" became 4).
+TYPED_MAX = 999.0
 
 
 def kappa_to_ticks(kappa: float) -> int:
@@ -278,11 +281,15 @@ class AlbedoPanel(QWidget):
 
     CHANNELS = ("R", "G", "B")
 
+    #: A one-line message for the status bar (a typed κ beyond the range, a κ beyond the slider's end).
+    message = Signal(str)
+
     def __init__(self, document: Document, parent: QWidget | None = None, *, colour=None):
         super().__init__(parent)
         self.doc = document
         self.colour = colour
         self.uid = -1
+        self._beyond: tuple = ()  # the channels whose κ is past the slider's end (said once)
         self.high = np.full(3, KAPPA_MAX)  # top of the κ range per channel
         grid = QGridLayout(self)
         grid.setContentsMargins(0, 0, 0, 0)
@@ -301,7 +308,7 @@ class AlbedoPanel(QWidget):
             slider.setTickPosition(QSlider.TickPosition.TicksBelow)
             slider.setMinimumWidth(80)
             spin = QDoubleSpinBox(objectName=f"kappa_{name}_value")
-            spin.setRange(0.0, KAPPA_MAX)
+            spin.setRange(0.0, TYPED_MAX)
             spin.setDecimals(4)
             spin.setStepType(QDoubleSpinBox.StepType.AdaptiveDecimalStepType)
             spin.setKeyboardTracking(False)
@@ -385,13 +392,19 @@ class AlbedoPanel(QWidget):
             top = math.floor(math.log2(max(min(self.high[c], KAPPA_MAX), KAPPA_MIN)) * TICKS_PER_STOP)
             with QSignalBlocker(self.sliders[c]), QSignalBlocker(self.spins[c]):
                 self.sliders[c].setRange(kappa_to_ticks(KAPPA_MIN), max(top, kappa_to_ticks(KAPPA_MIN)))
-                self.spins[c].setMaximum(max(float(self.high[c]), KAPPA_MAX))
 
     def _show(self, kappa) -> None:
         for c in range(3):
             with QSignalBlocker(self.sliders[c]), QSignalBlocker(self.spins[c]):
                 self.sliders[c].setValue(kappa_to_ticks(kappa[c]))
                 self.spins[c].setValue(float(kappa[c]))
+        ends = [ticks_to_kappa(s.maximum()) for s in self.sliders]
+        beyond = tuple(c for c in range(3) if kappa[c] > ends[c] * (1 + 1e-6))
+        if beyond and beyond != self._beyond:  # e.g. a colour asked for more than the slider shows
+            self.message.emit("; ".join(f"κ {self.CHANNELS[c]} = {kappa[c]:.3g} is past the slider's end "
+                                        f"({ends[c]:.3g})" for c in beyond) + ": its box shows it, and takes values "
+                              f"up to {min(self.high[beyond[0]], TYPED_MAX):.3g}")
+        self._beyond = beyond
 
     # ------------------------------------------------------------------ controls → model
     def _begin(self) -> None:
@@ -405,7 +418,11 @@ class AlbedoPanel(QWidget):
         self._set(channel, ticks_to_kappa(ticks), low=KAPPA_MIN)
 
     def _on_spin(self, channel: int, value: float) -> None:
-        self._set(channel, float(value), low=0.0)
+        top = float(self.high[channel])
+        if value > top:
+            why = "Albedit's range" if top == KAPPA_MAX else "the measured limit"
+            self.message.emit(f"κ {self.CHANNELS[channel]} is at most {top:.3g} ({why}); {value:g} was typed")
+        self._set(channel, min(float(value), top), low=0.0)
 
     def _set(self, channel: int, value: float, *, low: float) -> None:
         if self.uid == -1:

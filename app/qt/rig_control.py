@@ -347,6 +347,10 @@ class RigControl(QObject):
         self.w.statusBar().showMessage(
             f"Acquired {result.targets[-1][0]!r} in {result.shots} camera shots: drag its κ sliders", 15000)
 
+    def acquiring(self) -> bool:
+        """Whether an acquisition is running (or paused) in the dock."""
+        return self.panel is not None and self.panel.busy
+
     def shutdown(self) -> None:
         """The window closes: stop an acquisition (its captures stay in the session), close the rig."""
         if self.panel is not None:

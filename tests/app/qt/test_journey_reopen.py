@@ -47,8 +47,13 @@ def test_an_interrupted_acquisition_is_resumed_after_reopening(make_window, qtbo
     panel = window.rigs.panel
     arrivals = []
 
-    def cancel_soon(name):  # the lab tech stops after two captures
+    def cancel_soon(name):  # the lab tech tries to quit at the first capture, thinks better of it, then cancels
         arrivals.append(name)
+        if len(arrivals) == 1:
+            dialogs.answers = [QMessageBox.StandardButton.No]
+            assert not window.close() and window.isVisible() and panel.busy
+            (_kind, _title, text), = [d for d in dialogs.shown if d[0] == "question"]
+            assert text.startswith("An acquisition is running. Quit and stop it?") and str(session) in text
         if len(arrivals) == 2:
             user.click(user.find("acquire_progress_cancel", QPushButton))
 

@@ -256,7 +256,9 @@ def test_acquire_refuses_unreachable_pixels(make_window, dialogs):
     t = doc.add_target("t")
     doc.paint(t.uid, (0, 10, 0, 10), np.ones((10, 10), bool), True)
 
-    class Rig:
+    class Rig:  # a camera of the photograph's size; nothing else is reached before the refusal
+        camera = type("Camera", (), {"resolution": (20, 30)})()
+
         def close(self):
             pass
 
