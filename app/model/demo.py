@@ -63,7 +63,8 @@ class Demo:
 
 
 def default_folder() -> Path:
-    """Where demo sessions go without the app's cache folder: ``$XDG_CACHE_HOME/albedit/demo``."""
+    """Where demo sessions go (the app's and ``albedit demo``'s): ``$XDG_CACHE_HOME/albedit/demo``, beside the
+    virtual and path-traced rigs' caches."""
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "albedit" / "demo"
 
 

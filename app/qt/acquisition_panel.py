@@ -34,6 +34,7 @@ from app.qt.worker import Job, JobProgress, UiCaller, run_on_rig
 from engine.acquire import CAPTURE_PREFIX, Adaptive, CaptureSettings
 from engine.calibrate.graycode import fill_correspondence
 from engine.errors import InputError, SessionError
+from engine.text import counted
 from engine.workflow import Unreachable, check_rig, estimated_report, load_calibration, preflight, run_capture
 from engine.workflow.calibration import ACQUISITION_GROUP, PHOTOGRAPH_PATTERN
 
@@ -247,7 +248,7 @@ class AcquisitionPanel(QWidget):
                            f"(order {plan['order']}); Start shows it again without new captures.")
             else:
                 self._note(f"An interrupted acquisition of {', '.join(plan['targets'])} (order {plan['order']}) "
-                           f"is in this session with {kept} captures: Resume continues it.")
+                           f"is in this session with {counted(kept, 'capture')}: Resume continues it.")
         else:  # the previous session's plan no longer sets the flood
             self._scene_flood()
         self._update()
@@ -357,7 +358,7 @@ class AcquisitionPanel(QWidget):
         job.ended.connect(lambda: self._on_ended(job))
         self.job = job
         self._cancelling = False
-        notes = [f"{resumed} captures already in the session are reused." if resumed else "Acquiring…"]
+        notes = [f"{counted(resumed, 'capture')} already in the session reused." if resumed else "Acquiring…"]
         self._left_out = [f"{n} pixels of {name!r} the projector cannot reach were left out."
                           for name, n in left_out.items()]
         notes += self._left_out
@@ -422,7 +423,7 @@ class AcquisitionPanel(QWidget):
 
     def _on_cancelled(self, _exc) -> None:
         kept = len(self._plan_captures())
-        self._note(f"Cancelled. The {kept} captures taken so far are kept in the session: Resume continues "
+        self._note(f"Cancelled. The {counted(kept, 'capture')} taken so far stay in the session: Resume continues "
                    "where it stopped.")
         self.cancelled.emit()
 

@@ -107,7 +107,7 @@ ACTIONS: tuple[ActionSpec, ...] = (
                "(preview and export); off: the plain κ-weighted sum", "decomposition", checkable=True, checked=True),
     ActionSpec("fit", "&Fit", "on_fit", "Ctrl+0", "The whole image in the window", "document"),
     ActionSpec("zoom_100", "&100 %", "on_zoom_100", "Ctrl+1", "One camera pixel per screen pixel", "document"),
-    ActionSpec("zoom_in", "Zoom &In", "on_zoom_in", K.ZoomIn, "", "document"),
+    ActionSpec("zoom_in", "Zoom &In", "on_zoom_in", (K.ZoomIn, "Ctrl+="), "", "document"),  # = is + unshifted
     ActionSpec("zoom_out", "Zoom &Out", "on_zoom_out", K.ZoomOut, "", "document"),
     ActionSpec("calibrate", "&Calibrate Rig…", "calibrate", None,
                "Calibrate a camera–projector rig (the open one, or one the wizard opens) for this document"),

@@ -126,16 +126,19 @@ class FileControl(QObject):
         if not path:
             return
         ext, dtype = EXPORT_FILTERS.get(chosen, (Path(path).suffix.lower(), None))
+        note = ""
         if Path(path).suffix.lower() not in files.EXPORT_FORMATS:
+            typed = Path(path).suffix
             path = path + ext
-        self.export(path, dtype=dtype)
+            note = f" ({typed or 'no extension'} is not an export format: {ext} was added)"
+        self.export(path, dtype=dtype, note=note)
 
-    def export(self, path, *, dtype: str | None = None, clip: bool = False) -> None:
+    def export(self, path, *, dtype: str | None = None, clip: bool = False, note: str = "") -> None:
         """Export the full-resolution recolored image on a worker (see :func:`app.model.files.export_image`).
 
         The noise-aware recolor's data is prepared first when it is asked for and not ready yet, so an export
-        never writes the plain recolor by accident."""
-        if self.w.prepare_trusted_first(lambda: self.export(path, dtype=dtype, clip=clip)):
+        never writes the plain recolor by accident. ``note`` ends the status bar's "Exported …" line."""
+        if self.w.prepare_trusted_first(lambda: self.export(path, dtype=dtype, clip=clip, note=note)):
             return
         exposure = self.w.exposure_spin.value()
 
@@ -143,12 +146,12 @@ class FileControl(QObject):
             if isinstance(exc, files.NeedsClipping) and not clip:
                 answer = QMessageBox.question(self.w, "Export", f"{exc}\n\nClip those values to 1 and export anyway?")
                 if answer == QMessageBox.StandardButton.Yes:
-                    QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True))
+                    QTimer.singleShot(0, lambda: self.export(path, dtype=dtype, clip=True, note=note))
                 return
             self.w.show_error("Export failed", exc)
 
         self.w.run_job(files.export_image, self.w.doc, path, dtype=dtype, exposure=exposure, clip=clip,
-                     name="Exporting", on_done=lambda p: self.w.statusBar().showMessage(f"Exported {p}", 5000),
+                     name="Exporting", on_done=lambda p: self.w.statusBar().showMessage(f"Exported {p}{note}", 10000),
                      on_failed=failed)
 
     def maybe_save(self) -> bool:

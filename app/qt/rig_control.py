@@ -14,7 +14,7 @@ import json
 from datetime import datetime
 from pathlib import Path
 
-from PySide6.QtCore import QObject, QStandardPaths, Qt
+from PySide6.QtCore import QObject, Qt
 from PySide6.QtWidgets import QDockWidget, QMessageBox
 
 from app.qt.acquisition_panel import AcquisitionPanel
@@ -121,7 +121,8 @@ class RigControl(QObject):
         """The virtual-rig demo on a worker: its document, session and rig become the window's.
 
         Its resolution fills the canvas at ≤ 100 % (:func:`app.model.demo.demo_resolution`); its
-        session lives in the user's cache folder and is reused by the next start.
+        session lives in the user's cache folder beside the rigs' set-ups (:func:`app.model.demo.default_folder`,
+        ``~/.cache/albedit/demo``) and is reused by the next start.
         """
         from app.model.demo import DEMO_RIG, demo_resolution, open_demo
 
@@ -129,7 +130,6 @@ class RigControl(QObject):
         area = self.w.centralWidget()
         dpr = self.w.devicePixelRatioF()
         rig_options.setdefault("resolution", demo_resolution((int(area.height() * dpr), int(area.width() * dpr))))
-        cache = Path(QStandardPaths.writableLocation(QStandardPaths.StandardLocation.CacheLocation)) / "demo"
 
         def done(demo):
             doc, session = demo.document, demo.session
@@ -140,7 +140,7 @@ class RigControl(QObject):
                     f"Acquired {doc.targets[-1].name!r} on {rig_name} and recolored it as in the paper's Fig. 6; "
                     "try the κ sliders and the Error view", 15000)
 
-        self.w.run_job(open_demo, rig_name, folder=cache, name=f"Opening the {rig_name} demo", on_done=done,
+        self.w.run_job(open_demo, rig_name, name=f"Opening the {rig_name} demo", on_done=done,
                        **rig_options)
 
     # ------------------------------------------------------------------ calibration

@@ -33,6 +33,7 @@ from engine.progress import report
 from engine.recolor import recolor
 from engine.session.edit import mask_digest, mask_name
 from engine.session.paths import NAME
+from engine.text import counted
 from engine.trust import recolor_trusted
 
 #: The names of an acquisition's captures start with this and a hyphen (``acq-photograph``, ``acq-0``, ...).
@@ -84,13 +85,9 @@ class CascadeResult:
         '1 observation image (0 predicted) in 33 camera shots: 1 for the observations, 32 for the direct image D'
         """
         shots = max(int(shots), self.captures)
-        return (f"{_count(self.images, 'observation image')} ({self.predicted} predicted) in "
-                f"{_count(shots, 'camera shot')}: {self.captures} for the observations, {shots - self.captures} for "
+        return (f"{counted(self.images, 'observation image')} ({self.predicted} predicted) in "
+                f"{counted(shots, 'camera shot')}: {self.captures} for the observations, {shots - self.captures} for "
                 "the direct image D")
-
-
-def _count(n: int, noun: str) -> str:
-    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 class _Sequence:

@@ -18,6 +18,7 @@ from engine.figurate import MAX_ORDER
 from engine.progress import Progress, ShouldStop
 from engine.session import Session
 from engine.session.edit import check_target_name, mask_digest, mask_name
+from engine.text import listed
 from engine.workflow.calibration import ACQUISITION_GROUP, PHOTOGRAPH_PATTERN, check_rig, load_calibration
 from engine.workflow.colour import store_directs
 from engine.workflow.decomposition import decomposition_key
@@ -245,8 +246,8 @@ def preflight(
     previous = session.state.get("plan")
     if previous is not None and previous != plan:
         raise SessionError(
-            f"this session already holds a different acquisition plan (targets {previous.get('targets')}, order "
-            f"{previous.get('order')}): set the same controls to resume it, or acquire into a new session folder"
+            f"this session already holds a different acquisition plan (targets {listed(previous.get('targets', ()))}, "
+            f"order {previous.get('order')}): set the same controls to resume it, or acquire into a new session folder"
         )
     return Preflight(calibration, targets, left_out, plan)
 

@@ -192,7 +192,7 @@ def test_a_repainted_target_is_a_different_plan(rig, tmp_path):
         before = s.read_mask(stored)
         smaller = mask.copy()
         smaller[np.argwhere(mask)[0][0]] = False
-        with pytest.raises(SessionError, match="different acquisition plan"):
+        with pytest.raises(SessionError, match=r"different acquisition plan \(targets 'right_wall', order 2\)"):
             run_capture(r, s, [("right_wall", smaller)], 2)
         np.testing.assert_array_equal(Session.open(tmp_path / "s").read_mask(stored), before)
 

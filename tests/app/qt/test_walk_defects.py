@@ -76,3 +76,30 @@ def test_the_wheel_over_a_docks_control_scrolls_the_dock(make_window, acquired_d
     qtbot.waitUntil(radius.hasFocus)
     _wheel(radius, 1)
     assert radius.value() == before + 1  # a control the user clicked into takes the wheel
+
+
+def test_ctrl_equals_zooms_in_as_ctrl_plus_does(make_window, acquired_doc, qtbot):
+    """On most keyboards + is Shift+=: Ctrl+= did nothing."""
+    from PySide6.QtCore import Qt
+
+    window = make_window(acquired_doc)
+    user = User(qtbot, window)
+    before = window.canvas.zoom
+    user.press(Qt.Key.Key_Equal, Qt.KeyboardModifier.ControlModifier)
+    assert window.canvas.zoom > before
+
+
+def test_an_export_name_of_another_format_says_the_extension_it_got(make_window, acquired_doc, qtbot, tmp_path,
+                                                                    monkeypatch):
+    """'test.jpg' with the EXR filter wrote test.jpg.exr without a word."""
+    from PySide6.QtWidgets import QFileDialog
+
+    from app.qt.file_control import EXPORT_FILTERS
+
+    exr = next(f for f, (ext, _) in EXPORT_FILTERS.items() if ext == ".exr")
+    monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(tmp_path / "test.jpg"), exr)))
+    window = make_window(acquired_doc)
+    User(qtbot, window).trigger("export")
+    qtbot.waitUntil(lambda: window.job is None and (tmp_path / "test.jpg.exr").exists())
+    assert window.statusBar().currentMessage() == (f"Exported {tmp_path / 'test.jpg.exr'} (.jpg is not an export "
+                                                   "format: .exr was added)")
