@@ -450,7 +450,9 @@ class Document:
 
     # ----------------------------------------------------------------- acquisition
     def set_acquisition(self, cascade, decomposition, *, key: str | None = None, noise_aware: bool = True) -> None:
-        """Record a measured cascade (not undoable; clears the undo history of locked edits).
+        """Record a measured cascade (one undo step: undoing it is Discard Acquisition's, and the edits
+        before it, masks included, can then be undone too; the history is linear, so a redo reaches the
+        acquisition again only with the masks it measured).
 
         Parameters
         ----------
@@ -483,7 +485,7 @@ class Document:
             )
         self.end_stroke()
         self.end_kappa_gesture()
-        self.acquisition = Measurement(
+        measured = Measurement(
             cascade,
             tuple(self.target(u).kappa.copy() for u in cascade),
             tuple(self.target(u).mask.copy() for u in cascade),
@@ -491,10 +493,8 @@ class Document:
             key or f"decomposition-{uuid.uuid4().hex[:12]}",
             noise_aware=bool(noise_aware),
         )
-        # Undoing an earlier edit of a now-locked target would break the measurement.
-        self.history.clear()
-        self._dirty_outside_history = True
-        self.events.acquisition.emit()
+        names = ", ".join(repr(self.target(u).name) for u in cascade)
+        self.history.push(cmd.SetMeasurement(self, self.acquisition, measured, f"Acquire {names}"))
         self._emit_dirty()
 
     def set_noise_reduction(self, radius: int, decomposition=None) -> None:

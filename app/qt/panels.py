@@ -421,8 +421,11 @@ class AlbedoPanel(QWidget):
         top = float(self.high[channel])
         if value > top:
             why = "Albedit's range" if top == KAPPA_MAX else "the measured limit"
-            self.message.emit(f"κ {self.CHANNELS[channel]} is at most {top:.3g} ({why}); {value:g} was typed")
-        self._set(channel, min(float(value), top), low=0.0)
+            self.message.emit(f"κ {self.CHANNELS[channel]} is at most {top:.3g} ({why}): {value:g} was not applied")
+            if self.uid != -1:
+                self._show(self.doc.target(self.uid).kappa)
+            return
+        self._set(channel, float(value), low=0.0)
 
     def _set(self, channel: int, value: float, *, low: float) -> None:
         if self.uid == -1:

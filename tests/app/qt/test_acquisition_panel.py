@@ -166,7 +166,7 @@ def test_cancel_then_resume_after_a_restart_reuses_the_captures(fresh, make_pane
         first.start_button.click()
     kept = _acq(session)
     assert 10 <= len(kept) < _expected_captures(3)
-    assert "kept in the session" in first.status.text() and first.start_button.text() == "Resume"
+    assert "taken so far stay in the session" in first.status.text() and first.start_button.text() == "Resume"
     assert first.result is None and dialogs == []
 
     # a restart: a new panel on the same session finds the interrupted plan and restores it

@@ -85,6 +85,13 @@ def test_an_interrupted_acquisition_is_resumed_after_reopening(make_window, qtbo
         user.click("acquire_start")
     after = {c.name: c.sha256 for c in window.session.captures}
     assert {n: after[n] for n in kept} == kept  # reused, not retaken
+    # the acquisition is one undo step (it cleared the history before): undone, it is discarded; redone, back
+    measured = doc.acquisition
+    assert window.act_undo.text() == "&Undo Acquire 'target 1'"
+    user.trigger("undo")
+    assert doc.acquisition is None and not doc.mask_lock(doc.targets[0].uid)
+    user.trigger("redo")
+    assert doc.acquisition is measured
     with devices.open_rig("virtual:cornell", ideal=True, resolution=(RES, RES)) as check:
         truth = check.truth.recolor([(wall_mask, np.array([0.5, 1.0, 2.0]))])
         surfaces = ~check.truth.emitters()

@@ -16,10 +16,11 @@ def test_a_kappa_typed_beyond_the_range_is_said_not_dropped(make_window, qtbot):
     window = make_window(doc)
     user = User(qtbot, window)
     user.click("kappa_link")  # one channel alone
+    user.type_into("kappa_R_value", "3")
     user.type_into("kappa_R_value", "40")
-    np.testing.assert_allclose(wall.kappa, (16.0, 1.0, 1.0))
-    assert window.statusBar().currentMessage() == "κ R is at most 16 (Albedit's range); 40 was typed"
-    assert user.find("kappa_R_value").value() == 16.0
+    np.testing.assert_allclose(wall.kappa, (3.0, 1.0, 1.0))  # refused, as an impossible albedo is
+    assert window.statusBar().currentMessage() == "κ R is at most 16 (Albedit's range): 40 was not applied"
+    assert user.find("kappa_R_value").value() == 3.0
 
 
 def test_a_kappa_past_the_sliders_end_is_said(make_window, qtbot):
