@@ -215,8 +215,9 @@ def _recompute(session: Session, rig=None, *, denoise: int = 0, should_stop: Sho
                                            denoise=denoise)
 
 
-def reacquired(session: Session, rig=None, *, should_stop=None) -> CascadeResult:
-    """The session's acquisition rebuilt from its own captures (no rig needed when they are all there).
+def reacquired(session: Session, rig=None, *, progress: Progress | None = None, should_stop=None) -> CascadeResult:
+    """The session's acquisition rebuilt from its own captures (no rig needed when they are all there);
+    ``progress`` counts the captures read (:mod:`engine.progress`).
 
     Raises
     ------
@@ -236,7 +237,8 @@ def reacquired(session: Session, rig=None, *, should_stop=None) -> CascadeResult
     # a photograph under a projector pattern (capture --flood) is found by that pattern; sessions captured before
     # it was stored cannot be replayed (SessionError: the captures say which pattern they were taken with)
     pattern = session.read_array(ACQUISITION_GROUP, PHOTOGRAPH_PATTERN) if plan["photograph_pattern"] else None
-    recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session, should_stop=should_stop)
+    recorder = Recorder(_OfflineRig.of(session) if rig is None else rig, session, progress=progress,
+                        should_stop=should_stop)
     return acquire_cascade(recorder, load_calibration(session), targets, plan["order"],
                            fixed_kappa=plan["fixed_kappa"], settings=settings, adaptive=adaptive,
                            photograph_pattern=pattern)

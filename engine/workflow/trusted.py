@@ -92,19 +92,25 @@ def load_trusted(session: Session, key: str | None = None, *, rig=None, notes: l
         raise SessionError(f"the acquisition in {session.path} is of order 1 (the photograph only): no interaction "
                            "component to weigh against its noise; recolored plainly (κ times the photograph on the "
                            "target)")
-    report(progress, 0, 2, "reading the acquisition's captures")
-    result = reacquired(session, rig, should_stop=should_stop)
+    read = [0]  # the replay's capture count: it is most of the work (10-40 s on large sessions), then one step
+
+    def reading(step, total, _message=""):
+        read[0] = max(int(total), int(step))
+        report(progress, step, read[0] + 1, "reading the acquisition's captures")
+
+    reading(0, 1)
+    result = reacquired(session, rig, should_stop=should_stop, progress=reading if progress is not None else None)
     acq = result.acquisition
     if acq.covariance is None:
         raise NoNoiseModel(f"the acquisition in {session.path} carries no noise model (captured before the camera's "
                            "noise was measured): recolored plainly; recalibrate and capture again for the "
                            "noise-aware recolor")
     checkpoint(should_stop, "preparing the noise-aware recolor")
-    report(progress, 1, 2, "smoothing the interaction shares (once per acquisition)")
+    report(progress, read[0], read[0] + 1, "smoothing the interaction shares (once per acquisition)")
     trusted = result.targets[-1][1].trust(acq.observations, acq.covariance, should_stop=should_stop)
     try:
         session.cache_put(name, trusted.to_arrays())
     except (OSError, SessionError):
         pass  # a read-only session: the result is returned all the same
-    report(progress, 2, 2, "noise-aware recolor ready")
+    report(progress, read[0] + 1, read[0] + 1, "noise-aware recolor ready")
     return trusted

@@ -51,6 +51,20 @@ def test_prepared_once_then_read_back_from_the_cache(captured):
         np.testing.assert_array_equal(recolor_trusted(t, 1.0).image, acq.observations[0])  # κ = 1: the photograph
 
 
+def test_preparing_counts_the_captures_it_reads(captured):
+    """The replay is most of the preparation: it sat at 0 % for 10-40 s in the app; it counts its captures now."""
+    session, result = captured
+    session.cache_discard(trusted_key(result.key))
+    seen = []
+    load_trusted(session, progress=lambda step, total, message: seen.append((step, total, message)))
+    reads = [(s, t) for s, t, m in seen if m == "reading the acquisition's captures"]
+    n = sum(c.name.startswith("acq-") for c in session.captures)  # the acquisition's captures, D's included
+    assert reads[0] == (0, 2) and len(reads) > 10 and reads[-1] == (n, n + 1)  # every capture of the plan, in order
+    assert [s for s, _ in reads[1:]] == sorted(s for s, _ in reads[1:])
+    assert seen[-2:] == [(n, n + 1, "smoothing the interaction shares (once per acquisition)"),
+                         (n + 1, n + 1, "noise-aware recolor ready")]
+
+
 def test_an_unusable_cache_entry_is_prepared_again_and_said(captured):
     session, result = captured
     load_trusted(session)
