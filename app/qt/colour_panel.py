@@ -149,6 +149,8 @@ class ColourPanel(QWidget):
         self._read_error = ""
         self.uid = -1
         self.can_measure = False
+        self._typed_for: tuple | None = None  # (target uid, κ) the typed boxes' request gave
+        self._requesting = False
 
         self.swatch = QLabel(objectName="colour_swatch")
         self.swatch.setFixedSize(56, 28)
@@ -204,7 +206,7 @@ class ColourPanel(QWidget):
 
         self.choose.clicked.connect(self._choose)
         self.entry.returnPressed.connect(lambda: self._request(self.editor.request_colour, self.entry.text(),
-                                                               exposure=self._exposure()))
+                                                               box=self.entry, exposure=self._exposure()))
         self.albedo_entry.returnPressed.connect(self._typed_albedo)
         self.keep_luminance.toggled.connect(self._keep_luminance)
         self.eyedropper.toggled.connect(self.picking)
@@ -265,8 +267,16 @@ class ColourPanel(QWidget):
 
     # ------------------------------------------------------------------ model → controls
     def refresh(self) -> None:
-        """Show the current target's colour, albedo and what can be asked (or why nothing can)."""
-        self.uid = uid = self.doc.current
+        """Show the current target's colour, albedo and what can be asked (or why nothing can).
+
+        A typed colour or albedo stays in its box only while it is what the target shows: another target, or
+        its κ moved by other means, empties the boxes (they held the last request, read as the target's)."""
+        uid = self.doc.current
+        kappa = None if uid == -1 else tuple(self.doc.target(uid).kappa)
+        if not self._requesting and (uid, kappa) != self._typed_for:
+            for box in (self.entry, self.albedo_entry):
+                box.clear()
+        self.uid = uid
         reason = self._read_colours()
         known = ""
         if uid == -1:
@@ -318,16 +328,25 @@ class ColourPanel(QWidget):
             self.message.emit(warning)
 
     # ------------------------------------------------------------------ controls → model
-    def _request(self, fn, *args, **kwargs) -> bool:
-        """Run a colour request on the current target; a refusal changes nothing and says why."""
+    def _request(self, fn, *args, box: QLineEdit | None = None, **kwargs) -> bool:
+        """Run a colour request on the current target; a refusal changes nothing and says why. ``box``: the
+        typed box it came from, which keeps its text (the other box, and both for a pick or the dialog, empty)."""
         if self.uid == -1:
             return False
+        for other in (self.entry, self.albedo_entry):
+            if other is not box:
+                other.clear()
+        self._typed_for = (self.uid, tuple(self.doc.target(self.uid).kappa))  # a refusal keeps the text to mend
+        self._requesting = True
         try:
             warning = fn(self.uid, *args, **kwargs)
         except InputError as exc:
             self._show_outcome(str(exc), error=True)
             QMessageBox.warning(self, "Colour", str(exc))
             return False
+        finally:
+            self._requesting = False
+        self._typed_for = (self.uid, tuple(self.doc.target(self.uid).kappa))
         self._show_outcome(warning)
         return True
 
@@ -348,7 +367,7 @@ class ColourPanel(QWidget):
             self._show_outcome(msg, error=True)
             QMessageBox.warning(self, "Albedo", msg)
             return
-        self._request(self.editor.request_albedo, values)
+        self._request(self.editor.request_albedo, values, box=self.albedo_entry)
 
     def _keep_luminance(self, on: bool) -> None:
         self.editor.keep_luminance = bool(on)

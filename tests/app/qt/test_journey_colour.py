@@ -96,6 +96,7 @@ def test_the_artist_picks_colours_on_the_demo(demo, monkeypatch, dialogs, tmp_pa
     weights = luminance_weights()
     assert engine.colour(wall.kappa) @ weights == pytest.approx(engine.current @ weights)
     np.testing.assert_allclose(_chromaticity(truth * wall.kappa), _chromaticity(wanted), atol=0.01)
+    assert user.find("colour_entry").text() == "lab:60,-10,-30"  # what the target shows: the box keeps it
     user.click("colour_keep_luminance")
 
     # the eyedropper on the left wall (painted, not measured): the colour the photograph shows there
@@ -109,6 +110,7 @@ def test_the_artist_picks_colours_on_the_demo(demo, monkeypatch, dialogs, tmp_pa
     assert not window.canvas.picking and not user.find("colour_eyedropper").isChecked()  # one pick
     assert all(np.array_equal(a, t.mask) for a, t in zip(masks_before, doc.targets, strict=True))  # nothing painted
     np.testing.assert_allclose(wall.kappa, engine.for_seen(pick_colour(doc.photograph, x, y)), rtol=1e-9)
+    assert user.find("colour_entry").text() == ""  # the typed colour is no longer the target's: not left to mislead
 
     # the eyedropper on a reference picture opened beside the canvas: a paint colour from elsewhere
     picture = np.zeros((20, 30, 3), np.uint8)
