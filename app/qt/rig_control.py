@@ -14,7 +14,7 @@ import json
 from datetime import datetime
 from pathlib import Path
 
-from PySide6.QtCore import QObject, Qt
+from PySide6.QtCore import QObject, Qt, QTimer
 from PySide6.QtWidgets import QDockWidget, QMessageBox
 
 from app.qt.acquisition_panel import AcquisitionPanel
@@ -217,6 +217,9 @@ class RigControl(QObject):
         self.follow_document()
         self.dock.show()
         self.dock.raise_()
+        # a short dock (a 1024×700 screen) opens scrolled to Start, not to the settings above it
+        QTimer.singleShot(0, lambda: self.dock is not None and self.dock.widget().ensureWidgetVisible(
+            self.panel.start_button))
 
     def _ensure_dock(self) -> None:
         if self.dock is not None:

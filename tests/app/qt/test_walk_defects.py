@@ -104,3 +104,19 @@ def test_an_export_name_of_another_format_says_the_extension_it_got(make_window,
     qtbot.waitUntil(lambda: window.job is None and (tmp_path / "test.jpg.exr").exists())
     assert window.statusBar().currentMessage() == (f"Exported {tmp_path / 'test.jpg.exr'} (.jpg is not an export "
                                                    "format: .exr was added)")
+
+
+def test_the_acquisition_dock_opens_with_start_in_view_on_a_small_screen(make_window, qtbot):
+    """On a 1024×700 window the dock opened scrolled to its top, Start below the fold."""
+    import devices
+
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(24, 24)) as rig:
+        doc = Document(rig.truth.photograph())
+        doc.add_target("wall", rig.targets["right_wall"])
+        window = make_window(doc, rig=rig)
+        window.resize(1024, 700)
+        user = User(qtbot, window)
+        user.trigger("acquire")
+        start = user.find("acquire_start")
+        qtbot.waitUntil(lambda: start.isVisible() and not start.visibleRegion().isEmpty())
+        window.rigs.shutdown()
