@@ -294,7 +294,8 @@ def _install_toolbars(window) -> None:
     window.tol_spin.setDecimals(3)
     window.tol_spin.setValue(0.1)
     window.tol_spin.setPrefix("Tolerance ")
-    window.tol_spin.setToolTip("Fill tolerance: largest |log colour difference| to the clicked pixel (0.1 ≈ ±10 %)")
+    window.tol_spin.setToolTip("Fill tolerance: largest |log colour difference| between neighbouring pixels "
+                               "(0.1 ≈ ±10 %): the fill follows shading and stops at an edge")
     window.tol_spin.valueChanged.connect(lambda v: window.painter and setattr(window.painter, "tolerance", float(v)))
     window.exposure_spin = QDoubleSpinBox(objectName="display_exposure")
     window.exposure_spin.setRange(-12.0, 12.0)

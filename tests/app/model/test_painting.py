@@ -148,11 +148,21 @@ def test_fill_by_similar_colour_selects_the_connected_patch(doc):
     assert not t.mask.any()
 
 
-def test_similar_region_compares_log_colour_with_tolerance():
-    img = np.ones((1, 6, 3), np.float32)
-    img[0] = [[1.0] * 3, [1.05] * 3, [1.2] * 3, [1.0] * 3, [2.0] * 3, [1.0] * 3]
-    assert similar_region(img, 0.5, 0.5, 0.1).tolist() == [[True, True, False, False, False, False]]
-    assert similar_region(img, 0.5, 0.5, 0.25).tolist() == [[True, True, True, True, False, False]]
+def test_similar_region_follows_a_surfaces_shading_and_stops_at_its_edge():
+    """Steps between neighbours are compared (log colour, per channel), so a wall's gradual shading is one
+    region (compared with the seed alone, the default tolerance took a crescent of the demo's back wall);
+    a step stops it, and it never drifts more than 10 tolerances in brightness or 2 in hue from the seed."""
+    shading = np.geomspace(0.1, 0.24, 24, dtype=np.float32)  # ×2.4 across, 4 % a pixel
+    img = np.repeat(np.concatenate([shading, shading[-1:] * 2])[None, :, None], 3, axis=2)  # then a step ×2
+    got = similar_region(np.repeat(img, 5, axis=0), 0.5, 2.5, 0.1)
+    assert got[:, :24].all() and not got[:, 24].any()
+    long = np.repeat(np.geomspace(0.01, 1.0, 100, dtype=np.float32)[None, :, None], 3, axis=2)  # ×100, 5 % a pixel
+    reach = similar_region(np.repeat(long, 5, axis=0), 0.5, 2.5, 0.1)[2]
+    assert 20 <= reach.sum() <= 23  # as far as e^(10 × 0.1): 2.7× the seed
+    drift = np.ones((5, 60, 3), np.float32)
+    drift[..., 0] = np.geomspace(1.0, 3.0, 60, dtype=np.float32)  # the hue slides towards red, 2 % a pixel
+    reach = similar_region(drift, 0.5, 2.5, 0.1)[2]
+    assert 15 <= reach.sum() <= 18  # the red-vs-grey share moves by 2 tolerances after about 16 pixels
 
 
 def test_clear_and_invert_are_undoable(doc):
