@@ -28,12 +28,19 @@ __all__ = [
     "PATCHES",
     "ROWS",
     "Checker",
+    "NoChart",
     "checker_from_corners",
     "detect_checker",
     "patch_names",
     "reference_reflectances",
     "sample_patches",
 ]
+
+
+
+class NoChart(InputError):
+    """No chart could be found automatically; placing its four corners by hand still works."""
+
 
 COLUMNS, ROWS = 6, 4
 PATCHES = COLUMNS * ROWS
@@ -228,8 +235,10 @@ def detect_checker(image) -> Checker:
 
     Raises
     ------
+    NoChart
+        No chart found, or too small to sample (the message says to place its four corners by hand).
     InputError
-        No chart found (the message says to place its four corners by hand).
+        Not an RGB image.
 
     Notes
     -----
@@ -263,7 +272,7 @@ def detect_checker(image) -> Checker:
         found = ccd.segmenter_default(scaled, additional_data=True)
     rectangles = found.rectangles
     if len(rectangles) == 0:
-        raise InputError("no ColorChecker found in the photograph: place its four corners by hand "
+        raise NoChart("no ColorChecker found in the photograph: place its four corners by hand "
                          "(dark skin, bluish green, black, white)")
     work_h = float(int(h * work_w / w))
 
@@ -287,7 +296,7 @@ def _detector():
             warnings.simplefilter("ignore")
             import colour_checker_detection
     except ImportError:
-        raise InputError(
+        raise NoChart(
             "automatic colour-checker detection needs colour-checker-detection "
             "(pip install --no-deps colour-checker-detection); place the chart's four corners by hand instead"
         ) from None
@@ -341,7 +350,7 @@ def _oriented(image: np.ndarray, corners: np.ndarray) -> Checker:
             if err < best_err:
                 best, best_err = c, err
     if best is None:
-        raise InputError("a ColorChecker was found but its patches are too small to sample: move the camera "
+        raise NoChart("a ColorChecker was found but its patches are too small to sample: move the camera "
                          "closer or place the four corners by hand")
     return best
 

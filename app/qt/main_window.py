@@ -36,6 +36,7 @@ from app.model.views import NEED_HINTS, CanvasView
 from app.qt import actions
 from app.qt.actions import KeepAppShortcuts
 from app.qt.canvas import Canvas
+from app.qt.checker_corners import CornerPlacement
 from app.qt.colour_panel import ColourPanel, ReferenceView
 from app.qt.file_control import FileControl
 from app.qt.layout import fit_to_screen, scrolling
@@ -91,6 +92,7 @@ class MainWindow(QMainWindow):
         self.target_panel: TargetPanel | None = None
         self.albedo_panel: AlbedoPanel | None = None
         self.colour_panel: ColourPanel | None = None
+        self.corners: CornerPlacement | None = None  # placing a colour checker by hand (made with the canvas)
         self._ui = UiCaller(self)
         self.noise_panel: NoiseReductionPanel | None = None
         self._placeholder = QLabel(self.PLACEHOLDER, objectName="placeholder")
@@ -199,7 +201,9 @@ class MainWindow(QMainWindow):
         self.target_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         self.colour_panel = ColourPanel(document, lambda: self.session, self.exposure_spin.value)
         self.colour_panel.picking.connect(self.canvas.set_picking)
-        self.canvas.picked.connect(self.colour_panel.pick_photograph)
+        self.corners = CornerPlacement(self.canvas, lambda m: self.statusBar().showMessage(m, 20000))
+        self.corners.placed.connect(self.measure_checker)
+        self.canvas.picked.connect(self._on_picked)
         self.colour_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         self.colour_panel.checker_requested.connect(self.measure_checker)
         self.colour_panel.reference_requested.connect(self.open_reference)
@@ -239,7 +243,7 @@ class MainWindow(QMainWindow):
         for stack in self.undo_group.stacks():
             self.undo_group.removeStack(stack)
             stack.deleteLater()
-        self.preview = self.canvas = self.painter = self.colour_panel = None
+        self.preview = self.canvas = self.painter = self.colour_panel = self.corners = None
 
     @staticmethod
     def _stacked(*widgets: QWidget) -> QWidget:
@@ -590,9 +594,19 @@ class MainWindow(QMainWindow):
         job.cancelled.connect(cancelled)
 
     # ================================================================== colour
-    def measure_checker(self) -> None:
+    def _on_picked(self, x: float, y: float) -> None:
+        """A canvas pick: a colour checker's corner while placing one, else the eyedropper's colour."""
+        if self.corners is not None and self.corners.active:
+            self.corners.pick(x, y)
+        elif self.colour_panel is not None:
+            self.colour_panel.pick_photograph(x, y)
+
+    def measure_checker(self, corners=None) -> None:
         """The Albedo dock's Checker button: find a ColorChecker in the scene and measure it on the open rig
-        (a job); the session's targets get absolute albedo."""
+        (a job); the session's targets get absolute albedo. When the detector finds no chart, the user may
+        place its four corners by hand on the canvas (:class:`app.qt.checker_corners.CornerPlacement`), which
+        measures it at ``corners`` ((4, 2) camera pixels)."""
+        from engine.checker import NoChart
         from engine.workflow import run_checker
 
         rig, session, doc = self.rigs.rig, self.session, self.doc
@@ -606,8 +620,17 @@ class MainWindow(QMainWindow):
                 self.colour_panel.colours_changed()
                 self.albedo_panel.refresh()
 
-        self.run_job(run_on_rig, run_checker, rig, session, caller=self._ui, name="Measuring the colour checker",
-                     on_done=done, on_failed=lambda exc: self.show_error("Colour checker", exc))
+        def failed(exc):
+            if not (isinstance(exc, NoChart) and corners is None and self.corners is not None):
+                self.show_error("Colour checker", exc)
+            elif QMessageBox.question(self, "Colour checker", f"{exc}.\n\nPlace its four corners by hand on the "
+                                      "picture?") == QMessageBox.StandardButton.Yes:
+                self.corners.start()
+            else:  # the question said it all
+                self.statusBar().showMessage(f"Colour checker: {exc}", 12000)
+
+        self.run_job(run_on_rig, run_checker, rig, session, caller=self._ui, corners=corners,
+                     name="Measuring the colour checker", on_done=done, on_failed=failed)
 
     def open_reference(self) -> None:
         """The Albedo dock's Reference button: a picture from elsewhere beside the canvas, to pick colours in."""

@@ -13,7 +13,7 @@ import numpy as np
 from engine.acquire import CAPTURE_PREFIX, Recorder, measure_checker, prepare_target
 from engine.acquire.target import pattern_budget
 from engine.calibrate import fill_correspondence
-from engine.checker import ILLUMINANT, SENSITIVITIES, Checker, checker_from_corners, detect_checker
+from engine.checker import ILLUMINANT, SENSITIVITIES, Checker, NoChart, checker_from_corners, detect_checker
 from engine.checks import check_mask
 from engine.decompose import Decomposition
 from engine.errors import InputError, SessionError
@@ -118,8 +118,8 @@ def _detect(recorder: Recorder, base: np.ndarray) -> Checker:
         white = recorder.capture("checker-white", np.ones_like(recorder.black()), meta={"kind": "white"})
         try:
             return detect_checker(white)
-        except InputError:
-            raise first from None
+        except InputError as second:  # "not found" rather than "black": a scene lit by the projector alone
+            raise (first if isinstance(first, NoChart) else second) from None
 
 
 def store_directs(session: Session, prepared) -> None:

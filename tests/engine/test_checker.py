@@ -6,6 +6,7 @@ import pytest
 from engine.albedo import AlbedoScale, fit_albedo_scale, reference_scale
 from engine.checker import (
     Checker,
+    NoChart,
     checker_from_corners,
     detect_checker,
     patch_names,
@@ -69,10 +70,11 @@ def test_detection_finds_the_chart_and_its_orientation(turn):
 
 def test_no_chart_is_a_clear_error_that_offers_manual_corners():
     rng = np.random.default_rng(0)
-    with pytest.raises(InputError, match="place its four corners by hand"):
+    with pytest.raises(NoChart, match="place its four corners by hand"):  # the app then offers to place them
         detect_checker(rng.uniform(0.2, 0.4, SHAPE + (3,)).astype(np.float32))
-    with pytest.raises(InputError, match="black"):
+    with pytest.raises(InputError, match="black") as black:
         detect_checker(np.zeros(SHAPE + (3,), np.float32))
+    assert not isinstance(black.value, NoChart)  # nothing to place corners on
 
 
 def test_fit_recovers_the_scale_and_drops_a_bad_patch():

@@ -200,3 +200,53 @@ def test_the_checker_makes_albedo_absolute(checker_lab, dialogs):
     user.click_on_canvas(window.canvas, x + 0.5, y + 0.5)
     np.testing.assert_allclose(_chromaticity(truth["panel"] * panel.kappa), _chromaticity(truth["right_wall"]),
                                atol=0.01)
+
+
+def test_a_chart_the_detector_misses_is_placed_by_hand(checker_lab, dialogs, monkeypatch, qtbot):
+    """The detector's message said "place its four corners by hand" and the app had no way to: now the lab tech
+    answers Yes, clicks the four corners on the canvas (Esc would cancel), and the albedo is as absolute as when
+    the chart is found."""
+    from PySide6.QtWidgets import QMessageBox
+
+    import engine.workflow.colour as workflow_colour
+    from engine.checker import NoChart, detect_checker
+
+    window, user, rig = checker_lab
+    doc = window.doc
+    truth = rig.truth.albedo()[doc.by_name("panel").mask].mean(axis=0)
+    corners = detect_checker(doc.photograph).corners  # where the chart is (the lab tech sees it)
+    user.trigger("acquire")
+    user.type_into("acquire_order", "2")
+    user.click("acquire_start")
+    user.select_row(user.find("targets_list", QListWidget), 1)
+
+    def missed(_image):  # a chart the detector cannot find (half hidden, too oblique, too far)
+        raise NoChart("no ColorChecker found in the photograph: place its four corners by hand "
+                      "(dark skin, bluish green, black, white)")
+
+    monkeypatch.setattr(workflow_colour, "detect_checker", missed)
+    dialogs.answers = [QMessageBox.StandardButton.No]
+    user.click("colour_checker")
+    assert not window.corners.active and "relative" in user.find("colour_albedo", QLabel).text()  # No: nothing
+    dialogs.answers = [QMessageBox.StandardButton.Yes]
+    user.click("colour_checker")
+    assert window.corners.active and window.canvas.picking
+    assert "dark skin (top left) patch (1 of 4; Esc cancels)" in window.statusBar().currentMessage()
+    user.click_on_canvas(window.canvas, *corners[0])
+    user.press(Qt.Key.Key_Escape)  # changed their mind: start again
+    assert not window.corners.active and not window.canvas.picking
+    assert window.statusBar().currentMessage() == "Placing the colour checker's corners was cancelled"
+    dialogs.answers = [QMessageBox.StandardButton.Yes]
+    user.click("colour_checker")
+    masks = [t.mask.copy() for t in doc.targets]
+    for i, (x, y) in enumerate(corners):
+        if i:
+            assert f"({i + 1} of 4; Esc cancels)" in window.statusBar().currentMessage()
+        user.click_on_canvas(window.canvas, x, y)
+    qtbot.waitUntil(lambda: window.job is None)
+    shown = user.find("colour_albedo", QLabel).text()
+    assert shown.startswith("Absolute albedo "), shown
+    np.testing.assert_allclose(np.array(_numbers(shown)[3:6]), truth, rtol=0.03)
+    assert not window.canvas.picking and all(np.array_equal(m, t.mask) for m, t in zip(masks, doc.targets,
+                                                                                      strict=True))
+    assert [k for k, _t, _x in dialogs.shown].count("critical") == 0
