@@ -10,7 +10,7 @@ from pathlib import Path
 from engine.errors import InputError
 
 NAMES = ("solve", "recolor", "rig", "preview", "paper", "graycode", "denoise", "albedo", "loopback", "session",
-         "optics", "overlay", "trusted", "bound", "refine")
+         "optics", "overlay", "trusted", "bound", "refine", "fill")
 
 
 def add_arguments(parser) -> None:
