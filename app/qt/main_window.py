@@ -200,9 +200,9 @@ class MainWindow(QMainWindow):
         self.target_panel = TargetPanel(document)
         self.target_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         self.colour_panel = ColourPanel(document, lambda: self.session, self.exposure_spin.value)
-        self.colour_panel.picking.connect(self.canvas.set_picking)
         self.corners = CornerPlacement(self.canvas, lambda m: self.statusBar().showMessage(m, 20000))
         self.corners.placed.connect(self.measure_checker)
+        self.colour_panel.picking.connect(self._on_eyedropper)
         self.canvas.picked.connect(self._on_picked)
         self.colour_panel.message.connect(lambda m: self.statusBar().showMessage(m, 8000))
         self.colour_panel.checker_requested.connect(self.measure_checker)
@@ -355,6 +355,8 @@ class MainWindow(QMainWindow):
         tool = Tool(tool)
         with QSignalBlocker(self.tool_group):
             self.tool_actions[tool].setChecked(True)
+        if self.corners is not None:  # another tool ends placing a colour checker's corners
+            self.corners.cancel()
         if self.painter is not None:
             self.painter.set_tool(tool)
             self.canvas.update()
@@ -594,6 +596,13 @@ class MainWindow(QMainWindow):
         job.cancelled.connect(cancelled)
 
     # ================================================================== colour
+    def _on_eyedropper(self, on: bool) -> None:
+        """The Albedo dock's eyedropper, toggled: it ends placing a colour checker's corners."""
+        if self.corners is not None:
+            self.corners.cancel()
+        if self.canvas is not None:
+            self.canvas.set_picking(on)
+
     def _on_picked(self, x: float, y: float) -> None:
         """A canvas pick: a colour checker's corner while placing one, else the eyedropper's colour."""
         if self.corners is not None and self.corners.active:

@@ -236,6 +236,15 @@ def test_a_chart_the_detector_misses_is_placed_by_hand(checker_lab, dialogs, mon
     user.press(Qt.Key.Key_Escape)  # changed their mind: start again
     assert not window.corners.active and not window.canvas.picking
     assert window.statusBar().currentMessage() == "Placing the colour checker's corners was cancelled"
+    for other in (lambda: user.trigger("tool_lasso"), lambda: user.click("colour_eyedropper")):
+        dialogs.answers = [QMessageBox.StandardButton.Yes]
+        user.click("colour_checker")
+        assert window.corners.active
+        other()  # another tool, or the eyedropper, ends the placing too
+        assert not window.corners.active
+    user.click("colour_eyedropper")  # the eyedropper off again
+    user.trigger("tool_brush")
+    assert not window.canvas.picking
     dialogs.answers = [QMessageBox.StandardButton.Yes]
     user.click("colour_checker")
     masks = [t.mask.copy() for t in doc.targets]
