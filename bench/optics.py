@@ -437,11 +437,39 @@ def part_edge(args):
                 cells.append(f"{100 * e_wall:.3f} / {100 * e_in:.3f}%")
             print(f"{name:<18} {','.join(f'{x:g}' for x in kappa):>12} {cells[0]:>20} {cells[1]:>22} {cells[2]:>20}",
                   flush=True)
+    _edge_slots(_unblended(target, acq["with the stand-in"].observations), acq["with the stand-in"].observations[0],
+                cov, on, off, order)
     solid_next = target.mask & ~interior
     print("observations 1..3 off the whole target's on the solid pixels beside the edge: " + "; ".join(
         f"{name} " + " / ".join(f"{100 * relative_error(obs[r], whole[r], solid_next):.2f}%" for r in range(1, order))
         for name, obs in observations.items() if name != "whole target's"))
     rig.close()
+
+
+def _edge_slots(d, photo, cov, on, off, order):
+    """Print where the edge pixels' error lies: per slot of their decomposition as non-target (``F``: the
+    unreached light, then ``C R^m L_d``), ``F`` against the truth's target + neighbour parts, and the strip's
+    extrapolated target part against the truth's (mean over the edge pixels, % of the pixel's light, R G B)."""
+    from engine.edge import _strip
+
+    ys, xs = np.nonzero((cov > 0) & (cov < 1) & ~d.target)
+    own = np.concatenate([d.unreached[None, ys, xs], d.components[:order - 1, ys, xs]]).astype(np.float64)
+    pixel = photo[ys, xs].astype(np.float64)
+    own *= (pixel / own.sum(0))[None]
+    true_t = on[1:order + 1, ys, xs].astype(np.float64)
+    true_t[order - 1] += on[order + 1:, ys, xs].sum(0)
+    true_n = off[:order, ys, xs].astype(np.float64)
+    true_n[order - 1] += off[order:, ys, xs].sum(0)
+    strip = _strip(d.components, d.target & (photo > 0).all(-1), cov, ys, xs)[0]
+
+    def cell(x):
+        return " ".join(f"{v:+6.2f}" for v in 100 * (x / pixel).mean(0))
+
+    print(f"edge pixels ({len(ys)}), per slot, % of the pixel (R G B): F − truth | strip − truth's target part | "
+          "truth's target part | truth's neighbour part")
+    for j in range(order):
+        print(f"  slot {j}: {cell(own[j] - true_t[j] - true_n[j])} | {cell(strip[j] - true_t[j])} | "
+              f"{cell(true_t[j])} | {cell(true_n[j])}")
 
 
 FIG13_KAPPA = np.array([1.5, 4.5, 0.5])
