@@ -27,6 +27,21 @@ from tests.app.qt.user import TIMEOUT_MS, User
 RES = 32
 
 
+def open_room(make_window, qtbot, tmp_path):
+    """A threaded window with the ideal Cornell box's photograph (an EXR) opened in it, as File ▸ Open does.
+
+    Returns the window, its :class:`User`, the photograph and the right and left walls' masks.
+    """
+    with devices.open_rig("virtual:cornell", ideal=True, resolution=(RES, RES)) as rig:
+        photo, wall, left = rig.truth.photograph(), rig.targets["right_wall"], rig.targets["left_wall"]
+    imageio.write_image(tmp_path / "room.exr", photo)
+    window = make_window(synchronous=False)
+    user = User(qtbot, window)
+    window.open_path(tmp_path / "room.exr")
+    qtbot.waitUntil(lambda: window.doc is not None and window.job is None, timeout=TIMEOUT_MS)
+    return window, user, photo, wall, left
+
+
 def paint_wall(user: User, window, wall) -> None:
     """A brush stroke down the middle of the wall (its tallest column, two pixels in)."""
     user.click("target_add")
@@ -80,13 +95,7 @@ def calibrate(window, qtbot, *, identify: bool, rig: str | None = None, resoluti
 
 
 def test_the_lab_tech_calibrates_and_acquires(make_window, qtbot, tmp_path, monkeypatch, dialogs):
-    with devices.open_rig("virtual:cornell", ideal=True, resolution=(RES, RES)) as rig:
-        photo, wall, left = rig.truth.photograph(), rig.targets["right_wall"], rig.targets["left_wall"]
-    imageio.write_image(tmp_path / "room.exr", photo)
-    window = make_window(synchronous=False)
-    user = User(qtbot, window)
-    window.open_path(tmp_path / "room.exr")
-    qtbot.waitUntil(lambda: window.doc is not None and window.job is None, timeout=TIMEOUT_MS)
+    window, user, photo, wall, left = open_room(make_window, qtbot, tmp_path)
 
     assert "Nothing to fix" in calibrate(window, qtbot, identify=True)
     assert window.rig is not None and window.session is not None

@@ -14,9 +14,8 @@ from PySide6.QtWidgets import QMenu, QMessageBox, QPushButton
 import devices
 from app.model.files import recolored_image
 from app.model.views import CanvasView
-from engine import imageio
 from engine.acquire.predict import relative_error
-from tests.app.qt.test_journey_lab import RES, calibrate, paint_wall
+from tests.app.qt.test_journey_lab import RES, calibrate, open_room, paint_wall
 from tests.app.qt.user import TIMEOUT_MS, User
 
 
@@ -30,13 +29,7 @@ def open_recent(window, path) -> None:
 
 
 def test_an_interrupted_acquisition_is_resumed_after_reopening(make_window, qtbot, tmp_path, dialogs):
-    with devices.open_rig("virtual:cornell", ideal=True, resolution=(RES, RES)) as rig:
-        photo, wall, left = rig.truth.photograph(), rig.targets["right_wall"], rig.targets["left_wall"]
-    imageio.write_image(tmp_path / "room.exr", photo)
-    window = make_window(synchronous=False)
-    user = User(qtbot, window)
-    window.open_path(tmp_path / "room.exr")
-    qtbot.waitUntil(lambda: window.doc is not None and window.job is None, timeout=TIMEOUT_MS)
+    window, user, _photo, wall, left = open_room(make_window, qtbot, tmp_path)
     calibrate(window, qtbot, identify=False)
     session = window.session.path
     assert user.action("view_truth").isEnabled()  # the photograph is the open simulated rig's scene
