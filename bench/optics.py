@@ -412,10 +412,7 @@ def part_edge(args):
     def true_neighbour(obs, kappa):
         d = _unblended(target, obs)
         out = recolor(d, kappa)
-        own = np.concatenate([d.unreached[None], d.components[:order - 1]])[:, ys, xs].astype(np.float64)
-        own *= (obs[0][ys, xs] / np.maximum(own.sum(0), 1e-30))[None]
-        neighbour = off[:order, ys, xs].astype(np.float64)
-        neighbour[order - 1] += off[order:, ys, xs].sum(0)
+        own, neighbour = _as_neighbour(d, obs[0], ys, xs, order), _slots(off, ys, xs, order)
         part = np.maximum(own - neighbour, 0)
         out[ys, xs] = part[0] * kappa + sum(part[m + 1] * kappa ** (m + 2) for m in range(order - 1)) + sum(
             neighbour[j] * kappa**j for j in range(order))
@@ -437,8 +434,8 @@ def part_edge(args):
                 cells.append(f"{100 * e_wall:.3f} / {100 * e_in:.3f}%")
             print(f"{name:<18} {','.join(f'{x:g}' for x in kappa):>12} {cells[0]:>20} {cells[1]:>22} {cells[2]:>20}",
                   flush=True)
-    _edge_slots(_unblended(target, acq["with the stand-in"].observations), acq["with the stand-in"].observations[0],
-                cov, on, off, order)
+    stood_in = acq["with the stand-in"].observations
+    _edge_slots(_unblended(target, stood_in), stood_in[0], cov, on, off, ys, xs, order)
     solid_next = target.mask & ~interior
     print("observations 1..3 off the whole target's on the solid pixels beside the edge: " + "; ".join(
         f"{name} " + " / ".join(f"{100 * relative_error(obs[r], whole[r], solid_next):.2f}%" for r in range(1, order))
@@ -446,20 +443,28 @@ def part_edge(args):
     rig.close()
 
 
-def _edge_slots(d, photo, cov, on, off, order):
-    """Print where the edge pixels' error lies: per slot of their decomposition as non-target (``F``: the
-    unreached light, then ``C R^m L_d``), ``F`` against the truth's target + neighbour parts, and the strip's
-    extrapolated target part against the truth's (mean over the edge pixels, % of the pixel's light, R G B)."""
+def _as_neighbour(d, photo, ys, xs, order):
+    """Edge pixels' decomposition as non-target, ``F`` (the unreached light, then ``C R^m L_d``; ``order`` slots),
+    scaled to sum to the pixel's light as :func:`engine.edge.blend_edges` does: (order, N, C) float64."""
+    own = np.concatenate([d.unreached[None], d.components[:order - 1]])[:, ys, xs].astype(np.float64)
+    return own * (photo[ys, xs] / np.maximum(own.sum(0), 1e-30))[None]
+
+
+def _slots(terms, ys, xs, order, *, first=0):
+    """The truth's interactions ``terms[first:]`` at the edge pixels in ``order`` slots, the last holding the tail."""
+    out = terms[first:first + order, ys, xs].astype(np.float64)
+    out[order - 1] += terms[first + order:, ys, xs].sum(0)
+    return out
+
+
+def _edge_slots(d, photo, cov, on, off, ys, xs, order):
+    """Print where the edge pixels' ``(ys, xs)`` error lies: per slot of their decomposition as non-target
+    (:func:`_as_neighbour`), ``F`` against the truth's target + neighbour parts, and the strip's extrapolated
+    target part against the truth's (mean over the edge pixels, % of the pixel's light, R G B)."""
     from engine.edge import _strip
 
-    ys, xs = np.nonzero((cov > 0) & (cov < 1) & ~d.target)
-    own = np.concatenate([d.unreached[None, ys, xs], d.components[:order - 1, ys, xs]]).astype(np.float64)
-    pixel = photo[ys, xs].astype(np.float64)
-    own *= (pixel / own.sum(0))[None]
-    true_t = on[1:order + 1, ys, xs].astype(np.float64)
-    true_t[order - 1] += on[order + 1:, ys, xs].sum(0)
-    true_n = off[:order, ys, xs].astype(np.float64)
-    true_n[order - 1] += off[order:, ys, xs].sum(0)
+    own, pixel = _as_neighbour(d, photo, ys, xs, order), photo[ys, xs].astype(np.float64)
+    true_t, true_n = _slots(on, ys, xs, order, first=1), _slots(off, ys, xs, order)
     strip = _strip(d.components, d.target & (photo > 0).all(-1), cov, ys, xs)[0]
 
     def cell(x):
