@@ -576,7 +576,7 @@ class Document:
         trusted, problem = self._trusted.get(acq.key, (None, ""))
         if trusted is not None:
             return "noise-aware recolor"
-        return f"plain recolor: {problem}" if problem else "plain recolor until the noise-aware one is prepared"
+        return f"plain recolor: {problem}" if problem else "plain recolor for now"
 
     def discard_acquisition(self) -> None:
         """Forget the measurement (one undo step): every κ and mask becomes editable again."""

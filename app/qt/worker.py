@@ -465,7 +465,7 @@ class JobProgress(QWidget):
         self.bar.setRange(0, 1)
         self.bar.setValue(0)
         self.bar.setFormat(f"0 / 0 {self.unit}" if self.unit else "%p%")
-        self.label.setText(note)
+        self._say(note)
         self._set_paused(False)
         self.pause.setEnabled(False)
         self.cancel.setEnabled(False)
@@ -490,7 +490,7 @@ class JobProgress(QWidget):
     def update_progress(self, step: int, total: int, message: str) -> None:
         """Slot for :attr:`Job.progress`."""
         if total <= 0:
-            self.label.setText(message)
+            self._say(message)
             return
         total = max(int(total), int(step), 1)
         self.bar.setRange(0, total)
@@ -498,7 +498,12 @@ class JobProgress(QWidget):
         self.bar.setFormat(f"{int(step)} / {total} {self.unit}" if self.unit else "%p%")
         seconds = self.time_left.update(step, total)
         left = "" if seconds is None or step >= total else f" · about {format_duration(seconds)} left"
-        self.label.setText(f"{message}{left}")
+        self._say(f"{message}{left}")
+
+    def _say(self, message: str) -> None:
+        """Show ``message``; the label is cut short in a narrow status bar, so it is the tooltip too."""
+        self.label.setText(message)
+        self.label.setToolTip(message)
 
     @property
     def seconds_left(self) -> float | None:
@@ -518,7 +523,7 @@ class JobProgress(QWidget):
         self.pause.blockSignals(False)
         self.pause.setText("Resume" if on else "Pause")
         if on:
-            self.label.setText("paused")
+            self._say("paused")
 
     def _end(self, note: str) -> None:
         self.job = None
@@ -527,6 +532,6 @@ class JobProgress(QWidget):
         self.cancel.setEnabled(False)
         if self.bar.maximum() == 0:
             self.bar.setRange(0, 1)
-        self.label.setText(note)
+        self._say(note)
         if self.hide_when_idle:
             self.hide()

@@ -310,6 +310,7 @@ def test_progress_shows_count_and_time_left(qtbot):
     now[0] += 6.0
     eta.update_progress(7, 10, "capturing cal-007")  # 3 captures in 6 s: 2 s each, 3 to go
     assert eta.seconds_left == pytest.approx(6.0) and "about 6 s left" in eta.label.text()
+    assert eta.label.toolTip() == eta.label.text()  # cut short in a narrow status bar: hover reads it whole
     assert eta.bar.value() == 7 and eta.bar.maximum() == 10
     for step in range(8, 17):  # instant steps at the start (a resumed run) leave the window
         now[0] += 1.0
