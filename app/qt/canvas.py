@@ -17,6 +17,7 @@ from PySide6.QtGui import (
     QColor,
     QFont,
     QFontMetrics,
+    QFontMetricsF,
     QImage,
     QLinearGradient,
     QMouseEvent,
@@ -45,6 +46,9 @@ def _qimage(words: np.ndarray) -> QImage:
 def _qimages(first: np.ndarray, second: np.ndarray | None) -> tuple[QImage, QImage | None]:
     return _qimage(first), (_qimage(second) if second is not None else None)
 
+
+#: How the banner's text is laid out in its strip.
+BANNER_FLAGS = Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap
 
 class Canvas(QWidget):
     """Image view with painting.
@@ -304,12 +308,8 @@ class Canvas(QWidget):
         p.drawLine(QPointF(x - 4, cy), QPointF(x - 1, cy + 3))
         p.drawLine(QPointF(x + 4, cy), QPointF(x + 1, cy - 3))
         p.drawLine(QPointF(x + 4, cy), QPointF(x + 1, cy + 3))
-        font = QFont(self.font())
-        font.setPointSizeF(max(font.pointSizeF(), 9))
-        p.setFont(font)
-        for text, right in (("recolored", False), ("original", True)):
-            tw = p.fontMetrics().horizontalAdvance(text) + 12
-            box = QRectF(x + 14 if right else x - 14 - tw, rect.top() + 8, tw, 20)
+        p.setFont(self._caption_font())
+        for text, box in self.split_captions(rect).items():
             p.setPen(Qt.PenStyle.NoPen)
             p.setBrush(QColor(0, 0, 0, 150))
             p.drawRoundedRect(box, 4, 4)
@@ -362,17 +362,40 @@ class Canvas(QWidget):
                 p.setPen(QPen(colour, width, style))
                 p.drawEllipse(self._mouse, r, r)
 
+    def _caption_font(self) -> QFont:
+        font = QFont(self.font())
+        font.setPointSizeF(max(font.pointSizeF(), 9))
+        return font
+
+    def banner_strip(self) -> tuple[QRectF, QRectF]:
+        """Where the banner is drawn (the strip across the top, its text's box); empty without a banner."""
+        if self.frame is None or not self.frame.banner:
+            return QRectF(), QRectF()
+        inner = QRectF(12, 0, max(self.width() - 24, 10), 1000)
+        box = QFontMetricsF(self.font()).boundingRect(inner, BANNER_FLAGS, self.frame.banner)
+        return QRectF(0, 0, self.width(), box.height() + 12), QRectF(12, 6, inner.width(), box.height())
+
+    def split_captions(self, rect: QRectF) -> dict[str, QRectF]:
+        """The split view's two captions beside the divider of the image drawn at ``rect``: at the picture's
+        top, but below the banner and inside the canvas when the picture reaches above it."""
+        metrics = QFontMetricsF(self._caption_font())
+        x = rect.left() + rect.width() * self.split
+        top = max(rect.top(), self.banner_strip()[0].bottom(), 0.0) + 8
+        boxes = {}
+        for text, right in (("recolored", False), ("original", True)):
+            tw = metrics.horizontalAdvance(text) + 12
+            boxes[text] = QRectF(x + 14 if right else x - 14 - tw, top, tw, 20)
+        return boxes
+
     def _draw_banner(self, p: QPainter, text: str) -> None:
         """A strip across the top of the canvas saying what the view cannot show yet."""
-        flags = Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap
-        inner = QRectF(12, 0, max(self.width() - 24, 10), 1000)
-        box = p.boundingRect(inner, flags, text)
-        strip = QRectF(0, 0, self.width(), box.height() + 12)
+        strip, box = self.banner_strip()
+        p.setFont(self.font())
         p.setPen(Qt.PenStyle.NoPen)
         p.setBrush(QColor(30, 60, 110, 215))
         p.drawRect(strip)
         p.setPen(QColor(245, 245, 245))
-        p.drawText(QRectF(12, 6, inner.width(), box.height()), flags, text)
+        p.drawText(box, BANNER_FLAGS, text)
 
     def _draw_scale(self, p: QPainter) -> None:
         s = self.frame.scale

@@ -59,6 +59,15 @@ def test_the_artist_with_a_photograph_and_the_lab_tech(make_window, qtbot, tmp_p
     assert frame.banner == NAIVE_BANNER and "Interreflections follow only once" in frame.banner
     naive = np.where(target.mask[..., None], photo * np.float32(KAPPA), photo).astype(np.float32)
     np.testing.assert_array_equal(frame.pixels, to_rgb32(naive))
+    # before/after: the split view's captions are not hidden under the banner
+    user.click("view_split_button")
+    user.wait_until(lambda: window.canvas.frame.second is not None)
+    canvas = window.canvas
+    strip = canvas.banner_strip()[0]
+    assert canvas.frame.banner and strip.height() > 0
+    for caption in canvas.split_captions(canvas.image_rect()).values():
+        assert caption.top() >= strip.bottom() and canvas.rect().toRectF().contains(caption)
+    user.click("view_recolored_button")
 
     monkeypatch.setattr(QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(tmp_path / "artist"), "")))
     user.trigger("save")  # a photograph has no session yet: Save asks for a new session folder
