@@ -535,8 +535,8 @@ def probe(*, gp=None) -> list[Availability]:
     try:
         cameras = list_cameras(gp=gp)
     except DeviceError as exc:
-        return [Availability("gphoto2:", False, str(exc))]
+        return [Availability("gphoto2", False, str(exc))]
     if not cameras:
-        return [Availability("gphoto2:", False,
+        return [Availability("gphoto2", False,
                              "no camera detected (connected by USB, switched on, not in mass-storage mode?)")]
     return [Availability(f"gphoto2:{port}", True, model) for model, port in cameras]

@@ -318,7 +318,7 @@ def test_listing_and_probe():
     gp = fake_gphoto2(script)
     assert list_cameras(gp=gp) == [("Nikon DSC D7100", "usb:001,004")]
     assert [str(a) for a in probe(gp=gp)] == [
-        "gphoto2:: unavailable — no camera detected (connected by USB, switched on, not in mass-storage mode?)"]
+        "gphoto2: unavailable — no camera detected (connected by USB, switched on, not in mass-storage mode?)"]
     (entry,) = probe(gp=gp)
     assert not entry.ok and "input/output error" in entry.reason
     script.finished()
@@ -466,7 +466,7 @@ def test_available_says_when_the_projector_screen_is_missing(monkeypatch):
 
     script = Script([("autodetect", (), [("Canon EOS 80D", "usb:001,005")])])
     monkeypatch.setattr(backend, "_gphoto2", lambda: fake_gphoto2(script))
-    (entry,) = [a for a in devices.available() if a.name.startswith("gphoto2:")]
+    (entry,) = [a for a in devices.available() if a.name.startswith("gphoto2")]
     assert entry.name == "gphoto2:usb:001,005" and entry.reason.startswith("Canon EOS 80D")
     assert not entry.ok and "no second screen" in entry.reason  # the offscreen test platform has one screen
     assert "pass projector='qtscreen:0'" in entry.reason

@@ -58,7 +58,7 @@ def _cli_error(capsys, *argv) -> str:
 
 def test_detection_with_no_camera(no_camera, capsys):
     (entry,) = probe()
-    assert entry.name == "gphoto2:" and not entry.ok and entry.reason.startswith("no camera detected")
+    assert entry.name == "gphoto2" and not entry.ok and entry.reason.startswith("no camera detected")
     with pytest.raises(DeviceError, match="opening the camera failed: no camera found: check that it is connected"):
         GPhoto2Camera()
     line = _cli_error(capsys, "devices", "--check", "gphoto2")

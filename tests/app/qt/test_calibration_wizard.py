@@ -70,7 +70,7 @@ def _snapshot(session_path) -> dict[str, str]:
 def test_rig_page_greys_out_unavailable_rigs_with_their_reason(make_wizard, monkeypatch):
     monkeypatch.setattr(devices, "available", lambda: [
         Availability("virtual:cornell", True, "simulated rig"),
-        Availability("gphoto2:", False, "cannot import: No module named 'gphoto2'"),
+        Availability("gphoto2", False, "cannot import: No module named 'gphoto2'"),
     ])
     w = make_wizard()
     items = [w.rig_page.rigs.item(i) for i in range(w.rig_page.rigs.count())]
