@@ -50,6 +50,7 @@ def _qimages(first: np.ndarray, second: np.ndarray | None) -> tuple[QImage, QIma
 #: How the banner's text is laid out in its strip.
 BANNER_FLAGS = Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap
 
+
 class Canvas(QWidget):
     """Image view with painting.
 
@@ -274,7 +275,7 @@ class Canvas(QWidget):
         if self.frame is not None and self.frame.scale is not None:
             self._draw_scale(p)
         if self.frame is not None and self.frame.banner:
-            self._draw_banner(p, self.frame.banner)
+            self._draw_banner(p)
         p.end()
         self.paint_count += 1
         if self.frame is not None:
@@ -387,7 +388,7 @@ class Canvas(QWidget):
             boxes[text] = QRectF(x + 14 if right else x - 14 - tw, top, tw, 20)
         return boxes
 
-    def _draw_banner(self, p: QPainter, text: str) -> None:
+    def _draw_banner(self, p: QPainter) -> None:
         """A strip across the top of the canvas saying what the view cannot show yet."""
         strip, box = self.banner_strip()
         p.setFont(self.font())
@@ -395,7 +396,7 @@ class Canvas(QWidget):
         p.setBrush(QColor(30, 60, 110, 215))
         p.drawRect(strip)
         p.setPen(QColor(245, 245, 245))
-        p.drawText(box, BANNER_FLAGS, text)
+        p.drawText(box, BANNER_FLAGS, self.frame.banner)
 
     def _draw_scale(self, p: QPainter) -> None:
         s = self.frame.scale
